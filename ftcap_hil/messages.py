@@ -1,0 +1,151 @@
+"""Messages exchanged between the bridges (adapters) and the allocator / vessel shells.
+
+Everything is SI and body-frame unless the field name says otherwise:
+
+* wrench ``tau``: (3,) = [surge force X (N), sway force Y (N), yaw moment N (N*m)],
+  body frame (x forward, y starboard, z down, as in NED / Fossen).
+* pose ``eta``: (3,) = [north (m), east (m), psi (rad)], NED.
+* body velocities ``nu``: (3,) = [u (m/s), v (m/s), r (rad/s)].
+* thruster forces ``u``: (m,) in N, one per thruster, in the order of the vessel file.
+
+Stamps are ``time.monotonic_ns()`` of the receiving process unless named otherwise.
+Bridges validate on receipt: a message that fails ``validate()`` is counted and dropped.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class MalformedMessage(ValueError):
+    """Raised by a bridge's decoder (or ``validate``) for input that must be dropped."""
+
+
+def _finite_vector(name: str, value: object, length: int | None = None) -> FloatArray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim != 1 or (length is not None and arr.shape[0] != length):
+        raise MalformedMessage(f"{name}: expected a vector of length {length}, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise MalformedMessage(f"{name}: non-finite value in {arr.tolist()}")
+    return arr
+
+
+@dataclass(frozen=True)
+class WrenchSetpoint:
+    """Demanded generalized force in the body frame: [X (N), Y (N), N (N*m)]."""
+
+    tau: FloatArray
+
+    @classmethod
+    def checked(cls, tau: object) -> WrenchSetpoint:
+        return cls(_finite_vector("wrench", tau, 3))
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """Vessel state: eta = [north, east, psi] (m, m, rad), nu = [u, v, r] (m/s, m/s, rad/s)."""
+
+    eta: FloatArray
+    nu: FloatArray
+    time_s: float = math.nan  # sender's clock (sim time), informative only
+
+    @classmethod
+    def checked(cls, eta: object, nu: object, time_s: float = math.nan) -> Odometry:
+        return cls(_finite_vector("eta", eta, 3), _finite_vector("nu", nu, 3), float(time_s))
+
+
+@dataclass(frozen=True)
+class ThrusterCommand:
+    """Per-thruster force commands u (N), shape (m,)."""
+
+    u: FloatArray
+
+    @classmethod
+    def checked(cls, u: object, m: int | None = None) -> ThrusterCommand:
+        return cls(_finite_vector("thruster command", u, m))
+
+
+class FaultKind(enum.Enum):
+    """Fault injected into one thruster (mapped to effectiveness delta and bias f)."""
+
+    OK = "ok"  # delta = 1, f = 0
+    OFF = "off"  # delta = 0, f = 0
+    STUCK = "stuck"  # delta = 0, f = last produced force (or the given value)
+    WEAK = "weak"  # delta = given value in [0, 1], f = 0
+    BIAS = "bias"  # delta unchanged, f = given value (N)
+
+
+@dataclass(frozen=True)
+class FaultInjection:
+    """Live fault injection request for thruster ``index`` (0-based)."""
+
+    index: int
+    kind: FaultKind
+    value: float = math.nan  # delta for WEAK, force (N) for BIAS / STUCK; NaN = default
+
+
+@dataclass(frozen=True)
+class EscStatus:
+    """ESC telemetry for one thruster, as reported on the CAN bus."""
+
+    index: int
+    rpm: float
+    current_a: float
+    voltage_v: float = math.nan
+    error_count: int = 0
+
+
+T = TypeVar("T")
+
+
+@dataclass
+class Stamped(Generic[T]):
+    value: T
+    stamp_ns: int
+
+
+@dataclass
+class Mailbox(Generic[T]):
+    """Latest-value slot written by library callbacks, read by the loop thread.
+
+    Callbacks never run allocator code: they validate, then ``put``. The loop ``take``s the
+    latest value with its age. Counters let the status report drops per port.
+    """
+
+    name: str
+    _slot: Stamped[T] | None = None
+    received: int = 0
+    malformed: int = 0
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def put(self, value: T, stamp_ns: int | None = None) -> None:
+        stamped = Stamped(value, time.monotonic_ns() if stamp_ns is None else stamp_ns)
+        with self._lock:
+            self._slot = stamped
+            self.received += 1
+
+    def count_malformed(self) -> None:
+        with self._lock:
+            self.malformed += 1
+
+    def latest(self) -> Stamped[T] | None:
+        with self._lock:
+            return self._slot
+
+    def age_s(self, now_ns: int | None = None) -> float:
+        """Seconds since the latest value arrived; +inf if none ever did."""
+        slot = self.latest()
+        if slot is None:
+            return math.inf
+        now = time.monotonic_ns() if now_ns is None else now_ns
+        return (now - slot.stamp_ns) * 1e-9

@@ -1,0 +1,122 @@
+"""Constrained allocation: step 3 of F-TCAP (eq. 13) with the slack eliminated.
+
+    u = argmin  || B Delta_hat u + b_hat - tau_d ||^2_Qs  +  || u - u_pref ||^2_Ru
+        s.t.    u in Omega(u_prev)    (amplitude box  intersected with  rate box, eq. 2)
+
+Qs = slack_weight / S^2 and Ru = effort_weight / u_range^2 keep the weights dimensionless;
+slack_weight >> effort_weight makes the wrench equation of eq. (13) nearly hard, so a
+feasible demand is met to ~effort_weight/slack_weight relative accuracy and an infeasible
+one is met in the Qs-weighted least-squares sense. u_pref is zero except for the estimator's
+excitation (``excitation.py``). Thrusters with delta_hat below ``dead_threshold`` are taken
+out: their box shrinks to {0} (reached at the allowed rate) unless they are being probed.
+
+If the QP backend fails, the clipped pseudo-inverse is used and the allocation is flagged
+``FALLBACK``. The command is always finite and inside Omega(u_prev).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from ftcap_hil.geometry import ThrusterSet, command_bounds
+from ftcap_hil.messages import FloatArray
+from ftcap_hil.qp import make_solver
+
+
+class AllocationStatus(enum.Enum):
+    OK = "ok"
+    FALLBACK = "fallback"  # solver failed; clipped pseudo-inverse used
+    INVALID_DEMAND = "invalid-demand"  # non-finite demand; zero demand allocated
+
+
+@dataclass(frozen=True)
+class AllocatorConfig:
+    slack_weight: float = 1e6
+    effort_weight: float = 1.0
+    dead_threshold: float = 0.1
+    backend: str = "proxqp"
+
+    def __post_init__(self) -> None:
+        if not self.slack_weight > 0 or not self.effort_weight > 0:
+            raise ValueError("allocator: slack_weight and effort_weight must be > 0")
+        if not 0.0 <= self.dead_threshold < 1.0:
+            raise ValueError(f"allocator.dead_threshold: need [0, 1), got {self.dead_threshold}")
+
+
+@dataclass(frozen=True)
+class Allocation:
+    u: FloatArray  # (m,) commands (N), inside Omega(u_prev)
+    tau_planned: FloatArray  # (k,) B Delta_hat u + b_hat: what the allocator expects to get
+    unallocated: FloatArray  # (k,) tau_d - tau_planned
+    saturated: FloatArray  # (m,) bool: at an amplitude or rate bound
+    dead: FloatArray  # (m,) bool: taken out of the allocation
+    status: AllocationStatus
+    iterations: int = 0
+
+
+class Allocator:
+    def __init__(
+        self, B: FloatArray, thrusters: ThrusterSet, dt_s: float, scale: FloatArray,
+        config: AllocatorConfig | None = None,
+    ) -> None:
+        self.config = config or AllocatorConfig()
+        self._B = np.array(B, dtype=np.float64)
+        self._u_min = thrusters.u_min
+        self._u_max = thrusters.u_max
+        self._step = thrusters.max_step(dt_s)
+        u_range = np.maximum(np.abs(self._u_min), np.abs(self._u_max))
+        self._qs = self.config.slack_weight / np.asarray(scale) ** 2
+        self._ru = self.config.effort_weight / u_range**2
+        self._solver = make_solver(self.config.backend, self._B.shape[1])
+
+    @property
+    def backend(self) -> str:
+        return self._solver.name
+
+    def bounds(
+        self, u_prev: FloatArray, dead: FloatArray, probe_limit: FloatArray | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """Omega(u_prev) with dead thrusters held at 0 (or within +-probe_limit when probed)."""
+        u_min = np.where(dead, 0.0, self._u_min)
+        u_max = np.where(dead, 0.0, self._u_max)
+        if probe_limit is not None:
+            probing = dead & (probe_limit > 0)
+            u_min = np.where(probing, np.maximum(self._u_min, -probe_limit), u_min)
+            u_max = np.where(probing, np.minimum(self._u_max, probe_limit), u_max)
+        return command_bounds(u_min, u_max, self._step, u_prev)
+
+    def allocate(
+        self,
+        tau_d: FloatArray,
+        delta_hat: FloatArray,
+        bf_hat: FloatArray,
+        u_prev: FloatArray,
+        u_pref: FloatArray | None = None,
+        probe_limit: FloatArray | None = None,
+    ) -> Allocation:
+        status = AllocationStatus.OK
+        if not np.all(np.isfinite(tau_d)):
+            tau_d = np.zeros_like(bf_hat)
+            status = AllocationStatus.INVALID_DEMAND
+        dead = delta_hat < self.config.dead_threshold
+        lo, hi = self.bounds(u_prev, dead, probe_limit)
+        beff = self._B * delta_hat[None, :]
+        target = tau_d - bf_hat
+        pref = np.zeros_like(delta_hat) if u_pref is None else u_pref
+        H = beff.T @ (self._qs[:, None] * beff)
+        H[np.diag_indices_from(H)] += self._ru
+        g = -beff.T @ (self._qs * target) - self._ru * pref
+        sol = self._solver.solve(H, g, lo, hi)
+        if sol.found:
+            u = sol.x
+        else:
+            u = np.clip(np.linalg.pinv(beff) @ target, lo, hi)
+            u = np.where(np.isfinite(u), u, np.clip(0.0, lo, hi))
+            status = AllocationStatus.FALLBACK if status is AllocationStatus.OK else status
+        planned = beff @ u + bf_hat
+        tol = 1e-9 * (np.abs(lo) + np.abs(hi) + 1.0)
+        saturated = ((u - lo <= tol) | (hi - u <= tol)) & ~dead
+        return Allocation(u, planned, tau_d - planned, saturated, dead, status, sol.iterations)

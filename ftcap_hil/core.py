@@ -1,0 +1,131 @@
+"""One allocator cycle: estimate faults -> bounds -> allocate. Pure: no I/O, no clock.
+
+Call order per cycle t (Algorithm 1 of the paper):
+
+    w = plant.measured_wrench(x(t-1), x(t), dt)      # by the caller, from telemetry
+    result = core.step(tau_d(t), w)                  # w = None when telemetry is stale
+    send(result.u)
+
+``step`` assumes that the command applied over the last step is the one it returned last
+time (``applied`` overrides that, e.g. when the shell had to send zero).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ftcap_hil.allocator import Allocation, Allocator, AllocatorConfig
+from ftcap_hil.estimator import (
+    Estimate,
+    EstimatorConfig,
+    LiteralEstimator,
+    WindowedEstimator,
+    wrench_scale,
+)
+from ftcap_hil.excitation import Excitation, ExcitationConfig
+from ftcap_hil.geometry import ThrusterSet
+from ftcap_hil.messages import FloatArray
+
+
+class Mode(enum.Enum):
+    NONE = "none"  # reference run: no faults injected, allocator as CAP
+    CAP = "cap"  # allocation without estimation (Delta_hat = I, f_hat = 0)
+    FTCAP = "ftcap"  # windowed joint estimation (default)
+    FTCAP_LITERAL = "ftcap-literal"  # the paper's eqs. (9)-(11) read literally
+    ORACLE = "oracle"  # the true Delta and f handed to the allocator
+
+    @property
+    def estimates(self) -> bool:
+        return self in (Mode.FTCAP, Mode.FTCAP_LITERAL)
+
+
+@dataclass(frozen=True)
+class CoreConfig:
+    mode: Mode = Mode.FTCAP
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
+    allocator: AllocatorConfig = field(default_factory=AllocatorConfig)
+    excitation: ExcitationConfig = field(default_factory=ExcitationConfig)
+    fault_threshold: float = 0.8  # delta_hat below this: the thruster is reported faulty
+
+
+@dataclass(frozen=True)
+class Truth:
+    """The faults actually acting (for the oracle and for metrics)."""
+
+    delta: FloatArray
+    f: FloatArray
+
+
+@dataclass(frozen=True)
+class CycleResult:
+    u: FloatArray  # (m,) command to send (N)
+    estimate: Estimate
+    allocation: Allocation
+    faulty: FloatArray  # (m,) bool, delta_hat < fault_threshold
+    probing: FloatArray  # (m,) bool, a recovery probe is active
+    estimation_frozen: bool
+
+
+class FtcapCore:
+    def __init__(self, B: FloatArray, thrusters: ThrusterSet, dt_s: float, config: CoreConfig | None = None):
+        self.config = config or CoreConfig()
+        self.B = np.array(B, dtype=np.float64)
+        self.k, self.m = self.B.shape
+        if thrusters.m != self.m:
+            raise ValueError(f"B has {self.m} columns but the vessel has {thrusters.m} thrusters")
+        self.scale = wrench_scale(self.B, thrusters.u_min, thrusters.u_max)
+        self.allocator = Allocator(self.B, thrusters, dt_s, self.scale, self.config.allocator)
+        u_range = np.maximum(np.abs(thrusters.u_min), np.abs(thrusters.u_max))
+        self.excitation = Excitation(self.B, u_range, self.config.excitation)
+        mode = self.config.mode
+        self.estimator: WindowedEstimator | LiteralEstimator | None = None
+        if mode is Mode.FTCAP:
+            self.estimator = WindowedEstimator(self.B, self.scale, self.config.estimator)
+        elif mode is Mode.FTCAP_LITERAL:
+            self.estimator = LiteralEstimator(self.B, self.scale, self.config.estimator)
+        self._pinv = np.linalg.pinv(self.B)
+        self.u_prev = np.zeros(self.m)
+        self._estimate = Estimate(np.ones(self.m), np.zeros(self.k), np.zeros(self.m))
+
+    def _estimate_for(self, w: FloatArray | None, applied: FloatArray, truth: Truth | None) -> Estimate:
+        mode = self.config.mode
+        if mode is Mode.ORACLE:
+            if truth is None:
+                raise ValueError("oracle mode needs the true faults")
+            bf = self.B @ truth.f
+            return Estimate(truth.delta.copy(), bf, truth.f.copy())
+        if self.estimator is None or w is None or not np.all(np.isfinite(w)):
+            return self._estimate  # CAP/NONE keep the identity; stale telemetry freezes
+        return self.estimator.update(applied, w)
+
+    def step(
+        self,
+        tau_d: FloatArray,
+        w: FloatArray | None,
+        truth: Truth | None = None,
+        applied: FloatArray | None = None,
+    ) -> CycleResult:
+        """One cycle. tau_d (k,) demanded wrench; w (k,) measured actuator wrench over the
+        last step or None (stale telemetry: estimates frozen, allocation continues)."""
+        applied = self.u_prev if applied is None else applied
+        self._estimate = est = self._estimate_for(w, applied, truth)
+        dead = est.delta_hat < self.config.allocator.dead_threshold
+        if self.config.mode is Mode.FTCAP:
+            exc = self.excitation(est.delta_hat, dead)
+            u_pref, probe = exc.u_pref, exc.probe_limit
+        else:
+            u_pref, probe = None, None
+        alloc = self.allocator.allocate(tau_d, est.delta_hat, est.bf_hat, applied, u_pref, probe)
+        self.u_prev = alloc.u
+        probing = np.zeros(self.m, dtype=bool) if probe is None else probe > 0
+        return CycleResult(
+            alloc.u, est, alloc, est.delta_hat < self.config.fault_threshold, probing,
+            estimation_frozen=self.config.mode.estimates and w is None,
+        )
+
+    def reset_command(self, u: FloatArray | None = None) -> None:
+        """Tell the core what is on the actuators now (e.g. zero after a watchdog stop)."""
+        self.u_prev = np.zeros(self.m) if u is None else np.array(u, dtype=np.float64)

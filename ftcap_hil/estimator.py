@@ -1,0 +1,198 @@
+"""Fault estimation: steps 1 and 2 of F-TCAP (eqs. 9-12).
+
+Each cycle the estimator receives the command u (m,) that was applied over the last step and
+the generalized force w (k,) the plant model infers from the state change over that step
+(``plants.*.measured_wrench``), w = B (Delta u + f) + noise.
+
+``WindowedEstimator`` (the default) identifies theta = [delta (m), b = B f (k)] jointly by
+bounded least squares over the last N samples, penalising the change from the previous
+estimate (the R-term of eq. 10, here for delta *and* b):
+
+    min_theta  sum_j || S^-1 (Phi_j theta - w_j) ||^2 + || theta - theta_prev ||^2_Lambda
+    s.t.       0 <= delta_i <= 1,         Phi_j = [B diag(u_j), I_k]
+
+S = diag(max achievable |tau| per axis) makes the axes commensurate. Only B f is
+identifiable when B has a null space, so b is estimated, and a per-thruster f_hat is reported
+as its minimum-norm preimage pinv(B) b. Directions the window does not excite (a thruster held
+at a constant command: delta_i * const looks like a bias; a thruster not used at all) stay at
+the previous estimate through the Lambda term instead of drifting. When the one-step
+innovation jumps above a threshold (a fault onset), the window is restarted so that pre-fault
+samples cannot bias the new estimate.
+
+``LiteralEstimator`` is the paper read literally: step 1 puts the whole residual of the last
+step into the bias (eq. 9), so the slack of eq. (11) is zero at Gamma = 0 and Delta_hat never
+leaves its initial value. It is kept for comparison; tests pin that finding.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from ftcap_hil.messages import FloatArray
+from ftcap_hil.qp import ProxqpBoxSolver
+
+
+class EstimatorKind(enum.Enum):
+    WINDOWED = "windowed"
+    LITERAL = "literal"
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Tunables. Innovation and thresholds are normalized by S (fractions of max wrench)."""
+
+    window: int = 20  # N of eq. (10), samples
+    prior_weight_delta: float = 1e-5  # Lambda for delta (R of eq. 10); Q = 1 per sample
+    prior_weight_bias: float = 1e-5  # Lambda for S^-1 b
+    change_floor: float = 2e-3  # innovation above this (and above change_factor*RMS) restarts
+    change_factor: float = 6.0
+    holdoff: int = 0  # samples after a restart before another may happen (0: m + k)
+
+    def __post_init__(self) -> None:
+        if self.window < 2:
+            raise ValueError(f"estimator.window: need >= 2, got {self.window}")
+        for key in ("prior_weight_delta", "prior_weight_bias", "change_floor", "change_factor"):
+            if not getattr(self, key) > 0:
+                raise ValueError(f"estimator.{key}: must be > 0, got {getattr(self, key)}")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    delta_hat: FloatArray  # (m,) effectiveness in [0, 1]
+    bf_hat: FloatArray  # (k,) B f, generalized force (N, N, N*m)
+    f_hat: FloatArray  # (m,) minimum-norm per-thruster bias (N)
+    innovation: float = 0.0  # normalized one-step prediction error before the update
+    window_len: int = 0
+    restarted: bool = False
+
+
+def wrench_scale(B: FloatArray, u_min: FloatArray, u_max: FloatArray) -> FloatArray:
+    """Largest achievable |tau_j| per axis, sum_i |B_ji| max(|u_min_i|, |u_max_i|)."""
+    return np.abs(B) @ np.maximum(np.abs(u_min), np.abs(u_max))
+
+
+class WindowedEstimator:
+    def __init__(self, B: FloatArray, scale: FloatArray, config: EstimatorConfig | None = None):
+        self.config = config or EstimatorConfig()
+        self._B = np.array(B, dtype=np.float64)
+        self._k, self._m = self._B.shape
+        self._s = np.array(scale, dtype=np.float64)
+        self._Bs = self._B / self._s[:, None]  # S^-1 B
+        self._pinv = np.linalg.pinv(self._B)
+        n = self.config.window
+        self._U = np.zeros((n, self._m))
+        self._W = np.zeros((n, self._k))
+        self._E = np.zeros(n)  # past innovations, for the adaptive threshold
+        self._count = 0  # samples in the window since the last restart
+        self._head = 0
+        self._since_restart = 0
+        p = self._m + self._k
+        self._lam = np.concatenate(
+            [np.full(self._m, self.config.prior_weight_delta), np.full(self._k, self.config.prior_weight_bias) / self._s**2]
+        )
+        self._lo = np.concatenate([np.zeros(self._m), np.full(self._k, -np.inf)])
+        self._hi = np.concatenate([np.ones(self._m), np.full(self._k, np.inf)])
+        self._qp = ProxqpBoxSolver(p, eps_abs=1e-12)
+        self._holdoff = self.config.holdoff or p
+        self.theta = np.concatenate([np.ones(self._m), np.zeros(self._k)])
+
+    def reset(self, delta: FloatArray | None = None, bf: FloatArray | None = None) -> None:
+        self.theta = np.concatenate(
+            [np.ones(self._m) if delta is None else delta, np.zeros(self._k) if bf is None else bf]
+        )
+        self._count = 0
+
+    def _innovation(self, u: FloatArray, w: FloatArray) -> float:
+        pred = self._B @ (self.theta[: self._m] * u) + self.theta[self._m :]
+        return float(np.max(np.abs((w - pred) / self._s)))
+
+    def update(self, u: FloatArray, w: FloatArray) -> Estimate:
+        e = self._innovation(u, w)
+        n_e = min(self._count, self.config.window)
+        rms = float(np.sqrt(np.mean(self._E[:n_e] ** 2))) if n_e else 0.0
+        threshold = max(self.config.change_floor, self.config.change_factor * rms)
+        restarted = e > threshold and self._since_restart >= self._holdoff
+        if restarted:
+            self._count = 0
+            self._since_restart = 0
+        self._U[self._head] = u
+        self._W[self._head] = w
+        self._E[self._head] = e
+        self._head = (self._head + 1) % self.config.window
+        self._count = min(self._count + 1, self.config.window)
+        self._since_restart += 1
+        self.theta = self._solve()
+        return self.estimate(innovation=e, restarted=restarted)
+
+    def _window(self) -> tuple[FloatArray, FloatArray]:
+        idx = (self._head - 1 - np.arange(self._count)) % self.config.window
+        return self._U[idx], self._W[idx]
+
+    def _solve(self) -> FloatArray:
+        U, W = self._window()
+        Bs, s, m = self._Bs, self._s, self._m
+        Ws = W / s  # S^-1 w_j, rows
+        H = np.empty((m + self._k, m + self._k))
+        H[:m, :m] = (Bs.T @ Bs) * (U.T @ U)
+        H[:m, m:] = U.sum(axis=0)[:, None] * (Bs.T / s[None, :])
+        H[m:, :m] = H[:m, m:].T
+        H[m:, m:] = np.diag(U.shape[0] / s**2)
+        g = np.concatenate([(U * (Ws @ Bs)).sum(axis=0), Ws.sum(axis=0) / s])
+        H[np.diag_indices_from(H)] += self._lam
+        g = g + self._lam * self.theta
+        theta = np.linalg.solve(H, g)
+        delta = theta[:m]
+        if np.all(delta >= 0.0) and np.all(delta <= 1.0):
+            return theta
+        sol = self._qp.solve(H, -g, self._lo, self._hi)
+        if sol.found:
+            return sol.x
+        return np.concatenate([np.clip(delta, 0.0, 1.0), theta[m:]])
+
+    def estimate(self, innovation: float = 0.0, restarted: bool = False) -> Estimate:
+        delta = self.theta[: self._m].copy()
+        bf = self.theta[self._m :].copy()
+        return Estimate(delta, bf, self._pinv @ bf, innovation, self._count, restarted)
+
+
+class LiteralEstimator:
+    """Eqs. (9)-(11) as printed (see module docstring)."""
+
+    def __init__(self, B: FloatArray, scale: FloatArray, config: EstimatorConfig | None = None):
+        self.config = config or EstimatorConfig()
+        self._B = np.array(B, dtype=np.float64)
+        self._k, self._m = self._B.shape
+        self._s = np.array(scale, dtype=np.float64)
+        self._pinv = np.linalg.pinv(self._B)
+        self.delta = np.ones(self._m)
+        self.bf = np.zeros(self._k)
+        self._hist: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = []
+
+    def reset(self, delta: FloatArray | None = None, bf: FloatArray | None = None) -> None:
+        self.delta = np.ones(self._m) if delta is None else delta.copy()
+        self.bf = np.zeros(self._k) if bf is None else bf.copy()
+        self._hist.clear()
+
+    def update(self, u: FloatArray, w: FloatArray) -> Estimate:
+        # Step 1, eq. (9): B f_hat(t-1) = x(t) - A x(t-1) - B Delta_hat(t-1) u(t-1).
+        self.bf = w - self._B @ (self.delta * u)
+        self._hist.append((u, w, self.bf, self.delta.copy()))
+        self._hist = self._hist[-self.config.window :]
+        # Step 2, eqs. (10)-(11): min sum ||s_i||^2 + R ||gamma||^2 with the stored f_hat(t-i).
+        Bs = self._B / self._s[:, None]
+        H = np.diag(np.full(self._m, self.config.prior_weight_delta))
+        g = np.zeros(self._m)
+        for u_i, w_i, bf_i, _ in self._hist:
+            Phi = Bs * u_i[None, :]
+            r = (w_i - self._B @ (self.delta * u_i) - bf_i) / self._s
+            H += Phi.T @ Phi
+            g += Phi.T @ r
+        gamma = np.linalg.solve(H, g)
+        self.delta = np.clip(self.delta + gamma, 0.0, 1.0)
+        return Estimate(self.delta.copy(), self.bf.copy(), self._pinv @ self.bf, 0.0, len(self._hist))
+
+    def estimate(self) -> Estimate:
+        return Estimate(self.delta.copy(), self.bf.copy(), self._pinv @ self.bf, 0.0, len(self._hist))

@@ -1,0 +1,170 @@
+"""Box-constrained QP workspaces, persistent across cycles.
+
+    minimize   1/2 x^T H x + g^T x
+    subject to lo <= x <= hi                      (H: n x n, symmetric positive definite)
+
+A failed solve is data (``BoxQpSolution.found = False``), never an exception. Backends:
+
+* ``proxqp``: one ``proxsuite.proxqp.dense.QP`` with native box constraints, warm-started
+  from the previous result. proxsuite 0.8 segfaults when ``initial_guess`` is changed after
+  ``init()`` or when ``update()`` precedes the first ``solve()``: the option is set before
+  ``init()`` and the first problem is solved immediately.
+* ``daqp``: the dual active-set solver through its C entry point (no persistent object in
+  its Python API, but a call is cheap).
+* ``qpsolvers:<name>``: a one-shot ``qpsolvers.solve_qp`` per call. Slower (it rebuilds the
+  problem each time); used as the cross-check in tests and as the benchmark baseline.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from ftcap_hil.messages import FloatArray
+
+_BIG = 1e20  # stands for an infinite bound in backends that want finite numbers
+
+
+@dataclass(frozen=True)
+class BoxQpSolution:
+    x: FloatArray
+    found: bool
+    iterations: int = 0
+
+
+class BoxQpSolver(Protocol):
+    name: str
+
+    def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution: ...
+
+
+def _checked(x: FloatArray | None, lo: FloatArray, hi: FloatArray, tol: float) -> bool:
+    return (
+        x is not None
+        and bool(np.all(np.isfinite(x)))
+        and bool(np.all(x >= lo - tol))
+        and bool(np.all(x <= hi + tol))
+    )
+
+
+class ProxqpBoxSolver:
+    name = "proxqp"
+
+    def __init__(self, n: int, eps_abs: float = 1e-9, max_iter: int = 200) -> None:
+        from proxsuite import proxqp
+
+        self._proxqp = proxqp
+        self._n = n
+        self._eps_abs = eps_abs
+        self._max_iter = max_iter
+        self._qp: object | None = None
+
+    def _fresh(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> None:
+        proxqp = self._proxqp
+        qp = proxqp.dense.QP(self._n, 0, 0, True)
+        qp.settings.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+        qp.settings.eps_abs = self._eps_abs
+        qp.settings.eps_rel = 0.0
+        qp.settings.max_iter = self._max_iter
+        qp.settings.verbose = False
+        qp.init(H, g, None, None, None, None, None, lo, hi)
+        qp.solve()
+        self._qp = qp
+
+    def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
+        lo_f = np.maximum(lo, -_BIG)
+        hi_f = np.minimum(hi, _BIG)
+        if self._qp is not None:
+            qp = self._qp
+            qp.update(H, g, None, None, None, None, None, lo_f, hi_f)  # type: ignore[attr-defined]
+            qp.solve()  # type: ignore[attr-defined]
+            sol = self._result(lo, hi)
+            if sol.found:
+                return sol
+        # No workspace yet, or the warm start stalled (seen with cond(H) ~ 1e5 when the
+        # active set changes a lot): a cold start from a fresh workspace.
+        self._fresh(H, g, lo_f, hi_f)
+        sol = self._result(lo, hi)
+        if not sol.found:
+            self._qp = None
+        return sol
+
+    def _result(self, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
+        res = self._qp.results  # type: ignore[attr-defined]
+        ok = res.info.status == self._proxqp.QPSolverOutput.PROXQP_SOLVED
+        x = np.array(res.x, dtype=np.float64)
+        found = ok and _checked(x, lo, hi, 1e-7)
+        return BoxQpSolution(np.clip(x, lo, hi) if found else x, found, int(res.info.iter))
+
+
+class DaqpBoxSolver:
+    name = "daqp"
+
+    def __init__(self, n: int) -> None:
+        import daqp
+
+        self._daqp = daqp
+        self._n = n
+        self._A = np.zeros((0, n))
+        self._sense = np.zeros(n, dtype=np.int32)
+
+    def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
+        x, _fval, exitflag, info = self._daqp.solve(
+            np.ascontiguousarray(H), np.ascontiguousarray(g), self._A,
+            np.minimum(hi, _BIG), np.maximum(lo, -_BIG), self._sense,
+        )
+        x = np.asarray(x, dtype=np.float64)
+        found = exitflag >= 1 and _checked(x, lo, hi, 1e-7)
+        iterations = int(info.get("iterations", 0)) if isinstance(info, dict) else 0
+        return BoxQpSolution(np.clip(x, lo, hi) if found else x, found, iterations)
+
+
+class QpsolversBoxSolver:
+    """Per-call ``qpsolvers.solve_qp``: the baseline, not for the hot loop."""
+
+    def __init__(self, n: int, solver: str) -> None:
+        import qpsolvers
+
+        self._solve_qp = qpsolvers.solve_qp
+        self._solver = solver
+        self.name = f"qpsolvers:{solver}"
+
+    def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
+        x = self._solve_qp(H, g, lb=lo, ub=hi, solver=self._solver)
+        if x is None:
+            return BoxQpSolution(np.full_like(g, np.nan), False)
+        x = np.asarray(x, dtype=np.float64)
+        found = _checked(x, lo, hi, 1e-5)  # one-shot defaults are looser than our workspaces
+        return BoxQpSolution(np.clip(x, lo, hi) if found else x, found)
+
+
+_BACKENDS: dict[str, Callable[[int], BoxQpSolver]] = {
+    "proxqp": ProxqpBoxSolver,
+    "daqp": DaqpBoxSolver,
+}
+
+
+def available_backends() -> list[str]:
+    import qpsolvers
+
+    return sorted(_BACKENDS) + [f"qpsolvers:{s}" for s in qpsolvers.available_solvers]
+
+
+def make_solver(backend: str, n: int) -> BoxQpSolver:
+    """``proxqp`` | ``daqp`` | ``qpsolvers:<solver>``; ValueError names an unknown backend."""
+    if backend.startswith("qpsolvers:"):
+        import qpsolvers
+
+        solver = backend.split(":", 1)[1]
+        if solver not in qpsolvers.available_solvers:
+            raise ValueError(
+                f"qp backend {backend!r}: solver not installed (have {qpsolvers.available_solvers})"
+            )
+        return QpsolversBoxSolver(n, solver)
+    try:
+        return _BACKENDS[backend](n)
+    except KeyError:
+        raise ValueError(f"qp backend {backend!r}: unknown (choose from {available_backends()})") from None

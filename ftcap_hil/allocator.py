@@ -71,6 +71,7 @@ class Allocator:
         self._qs = self.config.slack_weight / np.asarray(scale) ** 2
         self._ru = self.config.effort_weight / u_range**2
         self._solver = make_solver(self.config.backend, self._B.shape[1])
+        self._tol = 1e-9 * (u_range + 1.0)  # "at a bound" for the saturation flags
 
     @property
     def backend(self) -> str:
@@ -80,9 +81,10 @@ class Allocator:
         self, u_prev: FloatArray, dead: FloatArray, probe_limit: FloatArray | None = None
     ) -> tuple[FloatArray, FloatArray]:
         """Omega(u_prev) with dead thrusters held at 0 (or within +-probe_limit when probed)."""
-        u_min = np.where(dead, 0.0, self._u_min)
-        u_max = np.where(dead, 0.0, self._u_max)
-        if probe_limit is not None:
+        live = ~dead
+        u_min = self._u_min * live
+        u_max = self._u_max * live
+        if probe_limit is not None and probe_limit.any():
             probing = dead & (probe_limit > 0)
             u_min = np.where(probing, np.maximum(self._u_min, -probe_limit), u_min)
             u_max = np.where(probing, np.minimum(self._u_max, probe_limit), u_max)
@@ -98,17 +100,20 @@ class Allocator:
         probe_limit: FloatArray | None = None,
     ) -> Allocation:
         status = AllocationStatus.OK
-        if not np.all(np.isfinite(tau_d)):
+        if not np.isfinite(tau_d).all():
             tau_d = np.zeros_like(bf_hat)
             status = AllocationStatus.INVALID_DEMAND
         dead = delta_hat < self.config.dead_threshold
-        lo, hi = self.bounds(u_prev, dead, probe_limit)
+        if dead.any():
+            lo, hi = self.bounds(u_prev, dead, probe_limit)
+        else:
+            lo, hi = command_bounds(self._u_min, self._u_max, self._step, u_prev)
         beff = self._B * delta_hat[None, :]
         target = tau_d - bf_hat
-        pref = np.zeros_like(delta_hat) if u_pref is None else u_pref
         H = beff.T @ (self._qs[:, None] * beff)
-        H[np.diag_indices_from(H)] += self._ru
-        g = -beff.T @ (self._qs * target) - self._ru * pref
+        H.flat[:: H.shape[0] + 1] += self._ru
+        g = beff.T @ (self._qs * target)
+        g = -g if u_pref is None else -g - self._ru * u_pref
         sol = self._solver.solve(H, g, lo, hi)
         if sol.found:
             u = sol.x
@@ -117,6 +122,5 @@ class Allocator:
             u = np.where(np.isfinite(u), u, np.clip(0.0, lo, hi))
             status = AllocationStatus.FALLBACK if status is AllocationStatus.OK else status
         planned = beff @ u + bf_hat
-        tol = 1e-9 * (np.abs(lo) + np.abs(hi) + 1.0)
-        saturated = ((u - lo <= tol) | (hi - u <= tol)) & ~dead
+        saturated = ((u - lo <= self._tol) | (hi - u <= self._tol)) & ~dead
         return Allocation(u, planned, tau_d - planned, saturated, dead, status, sol.iterations)

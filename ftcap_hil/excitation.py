@@ -29,7 +29,7 @@ class ExcitationConfig:
     dither_amplitude: float = 0.03  # fraction of each thruster's range, largest component
     dither_period: int = 2  # cycles per PRBS level
     probe_amplitude: float = 0.1  # fraction of the range
-    probe_interval: int = 100  # cycles between probes of a dead thruster (0: never)
+    probe_interval: int = 50  # cycles between probes of a dead thruster (0: never)
     probe_length: int = 4  # cycles per probe
     seed: int = 0
 
@@ -51,9 +51,30 @@ class Excitation:
         self.config = config or ExcitationConfig()
         self._B = np.asarray(B, dtype=np.float64)
         self._range = np.asarray(u_range, dtype=np.float64)
-        self._rng = np.random.default_rng(self.config.seed)
-        self._levels = np.zeros(self._B.shape[1])
+        m = self._B.shape[1]
+        # A fixed PRBS table (one +-1 level per null-space direction and period), drawn
+        # once: per-cycle random draws cost more than the rest of the excitation.
+        rng = np.random.default_rng(self.config.seed)
+        self._table = rng.integers(0, 2, size=(1024, m)) * 2.0 - 1.0
+        self._levels = np.zeros(m)
+        self._zero = np.zeros(m)
+        self._cached = np.zeros(m)
         self._cycle = 0
+        self._basis_key: tuple[FloatArray, FloatArray] | None = None
+        self._basis = np.zeros((0, 0))
+
+    def _null_basis(self, delta_hat: FloatArray, idx: FloatArray) -> FloatArray:
+        """Null space of the scaled live effective matrix; recomputed only when delta_hat
+        moved by more than 1e-3 or the live set changed (an SVD per cycle is the
+        dearest part of the excitation otherwise)."""
+        key = self._basis_key
+        if key is None or not np.array_equal(key[1], idx) or np.abs(key[0] - delta_hat).max() > 1e-3:
+            beff = self._B[:, idx] * (delta_hat[idx] * self._range[idx])[None, :]
+            _, sv, vt = np.linalg.svd(beff)
+            rank = int(np.sum(sv > 1e-9 * max(sv.max(initial=0.0), 1.0)))
+            self._basis = vt[rank:].T  # (live, nullity)
+            self._basis_key = (delta_hat.copy(), idx.copy())
+        return self._basis
 
     def _null_dither(self, delta_hat: FloatArray, live: FloatArray) -> FloatArray:
         m = self._B.shape[1]
@@ -61,27 +82,25 @@ class Excitation:
         idx = np.flatnonzero(live)
         if self.config.dither_amplitude == 0 or idx.size == 0:
             return out
-        # Scale columns to the thruster ranges so the dither uses each range evenly.
-        beff = self._B[:, idx] * (delta_hat[idx] * self._range[idx])[None, :]
-        _, sv, vt = np.linalg.svd(beff)
-        rank = int(np.sum(sv > 1e-9 * max(sv.max(initial=0.0), 1.0)))
-        basis = vt[rank:].T  # (live, nullity)
+        # Columns are scaled to the thruster ranges so the dither uses each range evenly.
+        basis = self._null_basis(delta_hat, idx)
         if basis.shape[1] == 0:
             return out
-        if self._cycle % self.config.dither_period == 0:
-            self._levels = self._rng.choice([-1.0, 1.0], size=m)
-        z = basis @ self._levels[: basis.shape[1]]
-        peak = np.max(np.abs(z))
+        level = self._cycle // self.config.dither_period
+        z = basis @ self._table[level % self._table.shape[0], : basis.shape[1]]
+        peak = np.abs(z).max()
         if peak > 0:
             out[idx] = self.config.dither_amplitude * self._range[idx] * z / peak
         return out
 
     def __call__(self, delta_hat: FloatArray, dead: FloatArray) -> ExcitationOutput:
-        """Excitation for this cycle; call once per cycle."""
-        u_pref = self._null_dither(delta_hat, ~dead)
-        limit = np.zeros_like(u_pref)
+        """Excitation for this cycle; call once per cycle. The returned arrays are shared
+        between calls: treat them as read-only."""
         cfg = self.config
-        if cfg.probe_interval and cfg.probe_amplitude and np.any(dead):
+        if self._cycle % cfg.dither_period == 0:  # the PRBS level only changes here
+            self._cached = self._null_dither(delta_hat, ~dead)
+        u_pref, limit = self._cached, self._zero
+        if cfg.probe_interval and cfg.probe_amplitude and dead.any():
             phase = self._cycle % cfg.probe_interval
             if phase < cfg.probe_length:
                 sign = 1.0 if phase % 2 == 0 else -1.0

@@ -41,13 +41,9 @@ class BoxQpSolver(Protocol):
     def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution: ...
 
 
-def _checked(x: FloatArray | None, lo: FloatArray, hi: FloatArray, tol: float) -> bool:
-    return (
-        x is not None
-        and bool(np.all(np.isfinite(x)))
-        and bool(np.all(x >= lo - tol))
-        and bool(np.all(x <= hi + tol))
-    )
+def _checked(x: FloatArray, lo: FloatArray, hi: FloatArray, tol: float) -> bool:
+    """Finite and inside [lo - tol, hi + tol] (a NaN fails the comparison)."""
+    return bool(np.abs(x - np.clip(x, lo, hi)).max(initial=0.0) <= tol)
 
 
 class ProxqpBoxSolver:
@@ -61,6 +57,7 @@ class ProxqpBoxSolver:
         self._eps_abs = eps_abs
         self._max_iter = max_iter
         self._qp: object | None = None
+        self._solved = proxqp.QPSolverOutput.PROXQP_SOLVED
 
     def _fresh(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> None:
         proxqp = self._proxqp
@@ -75,18 +72,15 @@ class ProxqpBoxSolver:
         self._qp = qp
 
     def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
-        lo_f = np.maximum(lo, -_BIG)
-        hi_f = np.minimum(hi, _BIG)
         if self._qp is not None:
-            qp = self._qp
-            qp.update(H, g, None, None, None, None, None, lo_f, hi_f)  # type: ignore[attr-defined]
-            qp.solve()  # type: ignore[attr-defined]
+            self._qp.update(H, g, None, None, None, None, None, lo, hi)  # type: ignore[attr-defined]
+            self._qp.solve()  # type: ignore[attr-defined]
             sol = self._result(lo, hi)
             if sol.found:
                 return sol
         # No workspace yet, or the warm start stalled (seen with cond(H) ~ 1e5 when the
         # active set changes a lot): a cold start from a fresh workspace.
-        self._fresh(H, g, lo_f, hi_f)
+        self._fresh(H, g, np.maximum(lo, -_BIG), np.minimum(hi, _BIG))
         sol = self._result(lo, hi)
         if not sol.found:
             self._qp = None
@@ -94,10 +88,9 @@ class ProxqpBoxSolver:
 
     def _result(self, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
         res = self._qp.results  # type: ignore[attr-defined]
-        ok = res.info.status == self._proxqp.QPSolverOutput.PROXQP_SOLVED
-        x = np.array(res.x, dtype=np.float64)
-        found = ok and _checked(x, lo, hi, 1e-7)
-        return BoxQpSolution(np.clip(x, lo, hi) if found else x, found, int(res.info.iter))
+        x = res.x.copy()
+        found = res.info.status == self._solved and _checked(x, lo, hi, 1e-7)
+        return BoxQpSolution(np.clip(x, lo, hi) if found else x, found, res.info.iter)
 
 
 class DaqpBoxSolver:
@@ -113,8 +106,7 @@ class DaqpBoxSolver:
 
     def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
         x, _fval, exitflag, info = self._daqp.solve(
-            np.ascontiguousarray(H), np.ascontiguousarray(g), self._A,
-            np.minimum(hi, _BIG), np.maximum(lo, -_BIG), self._sense,
+            H, g, self._A, np.minimum(hi, _BIG), np.maximum(lo, -_BIG), self._sense
         )
         x = np.asarray(x, dtype=np.float64)
         found = exitflag >= 1 and _checked(x, lo, hi, 1e-7)

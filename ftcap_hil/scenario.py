@@ -160,7 +160,11 @@ def _plant(data: dict[str, Any], where: str) -> tuple[LinearPlant | SurfaceVesse
         ))
         return LinearPlant(a=a, b_v=b_v), ths, b_u[None, :]
     if kind == "vessel":
-        params = {k: _float(plant_t, k, f"{where}.plant") for k in plant_t if k != "kind"}
+        params: dict[str, Any] = {
+            k: _float(plant_t, k, f"{where}.plant") for k in plant_t if k not in ("kind", "inversion")
+        }
+        if "inversion" in plant_t:
+            params["inversion"] = plant_t["inversion"]
         vessel = _dataclass_from(SurfaceVessel, params, f"{where}.plant")
         ths = thrusters_from_table(_get(data, "vessel", where), f"{where}.vessel")
         return vessel, ths, effectiveness(ths)

@@ -33,15 +33,19 @@ def replay_inputs(sc_name: str):  # type: ignore[no-untyped-def]
     x = np.column_stack([c[s] for s in sc.plant.state_labels])
     w = [None] + [sc.plant.measured_wrench(x[i - 1], x[i], sc.dt_s) for i in range(1, len(x))]
     truth = [
-        Truth(np.array([c[f"delta_{i}"][n] for i in range(1, m + 1)]),
-              np.array([c[f"f_{i}"][n] for i in range(1, m + 1)]))
+        Truth(
+            np.array([c[f"delta_{i}"][n] for i in range(1, m + 1)]),
+            np.array([c[f"f_{i}"][n] for i in range(1, m + 1)]),
+        )
         for n in range(len(x))
     ]
     return sc, tau_d, w, truth
 
 
 def time_core(sc, mode: Mode, backend: str, tau_d, w, truth) -> np.ndarray:  # type: ignore[no-untyped-def]
-    cfg = dataclasses.replace(sc.core, mode=mode, allocator=dataclasses.replace(sc.core.allocator, backend=backend))
+    cfg = dataclasses.replace(
+        sc.core, mode=mode, allocator=dataclasses.replace(sc.core.allocator, backend=backend)
+    )
     core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, cfg)
     out = np.empty(len(tau_d))
     for n in range(len(tau_d)):
@@ -71,8 +75,10 @@ def main() -> None:
     print(f"{args.scenario}: {len(tau_d)} cycles, m = {sc.thrusters.m}")
     for name, r in rows.items():
         r["ratio_to_baseline"] = r["median_us"] / base
-        print(f"  {name:55s} median {r['median_us']:7.1f} us  p99 {r['p99_us']:7.1f} us  "
-              f"x{r['ratio_to_baseline']:.2f} of baseline")
+        print(
+            f"  {name:55s} median {r['median_us']:7.1f} us  p99 {r['p99_us']:7.1f} us  "
+            f"x{r['ratio_to_baseline']:.2f} of baseline"
+        )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=2)

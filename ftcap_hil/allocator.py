@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ftcap_hil.geometry import ThrusterSet, command_bounds
-from ftcap_hil.messages import FloatArray
+from ftcap_hil.messages import BoolArray, FloatArray
 from ftcap_hil.qp import make_solver
 
 
@@ -51,15 +51,19 @@ class Allocation:
     u: FloatArray  # (m,) commands (N), inside Omega(u_prev)
     tau_planned: FloatArray  # (k,) B Delta_hat u + b_hat: what the allocator expects to get
     unallocated: FloatArray  # (k,) tau_d - tau_planned
-    saturated: FloatArray  # (m,) bool: at an amplitude or rate bound
-    dead: FloatArray  # (m,) bool: taken out of the allocation
+    saturated: BoolArray  # (m,): at an amplitude or rate bound
+    dead: BoolArray  # (m,): taken out of the allocation
     status: AllocationStatus
     iterations: int = 0
 
 
 class Allocator:
     def __init__(
-        self, B: FloatArray, thrusters: ThrusterSet, dt_s: float, scale: FloatArray,
+        self,
+        B: FloatArray,
+        thrusters: ThrusterSet,
+        dt_s: float,
+        scale: FloatArray,
         config: AllocatorConfig | None = None,
     ) -> None:
         self.config = config or AllocatorConfig()
@@ -78,7 +82,7 @@ class Allocator:
         return self._solver.name
 
     def bounds(
-        self, u_prev: FloatArray, dead: FloatArray, probe_limit: FloatArray | None = None
+        self, u_prev: FloatArray, dead: BoolArray, probe_limit: FloatArray | None = None
     ) -> tuple[FloatArray, FloatArray]:
         """Omega(u_prev) with dead thrusters held at 0 (or within +-probe_limit when probed)."""
         live = ~dead

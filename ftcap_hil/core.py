@@ -27,7 +27,7 @@ from ftcap_hil.estimator import (
 )
 from ftcap_hil.excitation import Excitation, ExcitationConfig
 from ftcap_hil.geometry import ThrusterSet
-from ftcap_hil.messages import FloatArray
+from ftcap_hil.messages import BoolArray, FloatArray
 
 
 class Mode(enum.Enum):
@@ -64,13 +64,15 @@ class CycleResult:
     u: FloatArray  # (m,) command to send (N)
     estimate: Estimate
     allocation: Allocation
-    faulty: FloatArray  # (m,) bool, delta_hat < fault_threshold
-    probing: FloatArray  # (m,) bool, a recovery probe is active
+    faulty: BoolArray  # (m,), delta_hat < fault_threshold
+    probing: BoolArray  # (m,), a recovery probe is active
     estimation_frozen: bool
 
 
 class FtcapCore:
-    def __init__(self, B: FloatArray, thrusters: ThrusterSet, dt_s: float, config: CoreConfig | None = None):
+    def __init__(
+        self, B: FloatArray, thrusters: ThrusterSet, dt_s: float, config: CoreConfig | None = None
+    ):
         self.config = config or CoreConfig()
         self.B = np.array(B, dtype=np.float64)
         self.k, self.m = self.B.shape
@@ -90,7 +92,9 @@ class FtcapCore:
         self.u_prev = np.zeros(self.m)
         self._estimate = Estimate(np.ones(self.m), np.zeros(self.k), np.zeros(self.m))
 
-    def _estimate_for(self, w: FloatArray | None, applied: FloatArray, truth: Truth | None) -> Estimate:
+    def _estimate_for(
+        self, w: FloatArray | None, applied: FloatArray, truth: Truth | None
+    ) -> Estimate:
         mode = self.config.mode
         if mode is Mode.ORACLE:
             if truth is None:
@@ -122,7 +126,11 @@ class FtcapCore:
         self.u_prev = alloc.u
         probing = np.zeros(self.m, dtype=bool) if probe is None else probe > 0
         return CycleResult(
-            alloc.u, est, alloc, est.delta_hat < self.config.fault_threshold, probing,
+            alloc.u,
+            est,
+            alloc,
+            est.delta_hat < self.config.fault_threshold,
+            probing,
             estimation_frozen=self.config.mode.estimates and w is None,
         )
 

@@ -100,10 +100,12 @@ class WindowedEstimator:
         self._head = 0
         self._since_restart = 0
         p = self._m + self._k
-        self._lam = np.concatenate([
-            np.full(self._m, self.config.prior_weight_delta),
-            np.full(self._k, self.config.prior_weight_bias) * self._inv_s2,
-        ])
+        self._lam = np.concatenate(
+            [
+                np.full(self._m, self.config.prior_weight_delta),
+                np.full(self._k, self.config.prior_weight_bias) * self._inv_s2,
+            ]
+        )
         self._lo = np.concatenate([np.zeros(self._m), np.full(self._k, -1e20)])
         self._hi = np.concatenate([np.ones(self._m), np.full(self._k, 1e20)])
         self._no_rows = np.zeros((0, p))
@@ -200,7 +202,11 @@ class LiteralEstimator:
             g += Phi.T @ r
         gamma = np.linalg.solve(H, g)
         self.delta = np.clip(self.delta + gamma, 0.0, 1.0)
-        return Estimate(self.delta.copy(), self.bf.copy(), self._pinv @ self.bf, 0.0, len(self._hist))
+        return Estimate(
+            self.delta.copy(), self.bf.copy(), self._pinv @ self.bf, 0.0, len(self._hist)
+        )
 
     def estimate(self) -> Estimate:
-        return Estimate(self.delta.copy(), self.bf.copy(), self._pinv @ self.bf, 0.0, len(self._hist))
+        return Estimate(
+            self.delta.copy(), self.bf.copy(), self._pinv @ self.bf, 0.0, len(self._hist)
+        )

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ftcap_hil.messages import FloatArray
+from ftcap_hil.messages import BoolArray, FloatArray, IntArray
 
 
 @dataclass(frozen=True)
@@ -60,15 +60,19 @@ class Excitation:
         self._zero = np.zeros(m)
         self._cached = np.zeros(m)
         self._cycle = 0
-        self._basis_key: tuple[FloatArray, FloatArray] | None = None
+        self._basis_key: tuple[FloatArray, IntArray] | None = None
         self._basis = np.zeros((0, 0))
 
-    def _null_basis(self, delta_hat: FloatArray, idx: FloatArray) -> FloatArray:
+    def _null_basis(self, delta_hat: FloatArray, idx: IntArray) -> FloatArray:
         """Null space of the scaled live effective matrix; recomputed only when delta_hat
         moved by more than 1e-3 or the live set changed (an SVD per cycle is the
         dearest part of the excitation otherwise)."""
         key = self._basis_key
-        if key is None or not np.array_equal(key[1], idx) or np.abs(key[0] - delta_hat).max() > 1e-3:
+        if (
+            key is None
+            or not np.array_equal(key[1], idx)
+            or np.abs(key[0] - delta_hat).max() > 1e-3
+        ):
             beff = self._B[:, idx] * (delta_hat[idx] * self._range[idx])[None, :]
             _, sv, vt = np.linalg.svd(beff)
             rank = int(np.sum(sv > 1e-9 * max(sv.max(initial=0.0), 1.0)))
@@ -76,7 +80,7 @@ class Excitation:
             self._basis_key = (delta_hat.copy(), idx.copy())
         return self._basis
 
-    def _null_dither(self, delta_hat: FloatArray, live: FloatArray) -> FloatArray:
+    def _null_dither(self, delta_hat: FloatArray, live: BoolArray) -> FloatArray:
         m = self._B.shape[1]
         out = np.zeros(m)
         idx = np.flatnonzero(live)
@@ -93,7 +97,7 @@ class Excitation:
             out[idx] = self.config.dither_amplitude * self._range[idx] * z / peak
         return out
 
-    def __call__(self, delta_hat: FloatArray, dead: FloatArray) -> ExcitationOutput:
+    def __call__(self, delta_hat: FloatArray, dead: BoolArray) -> ExcitationOutput:
         """Excitation for this cycle; call once per cycle. The returned arrays are shared
         between calls: treat them as read-only."""
         cfg = self.config

@@ -166,7 +166,9 @@ def thruster_from_table(table: dict[str, Any], where: str) -> Thruster:
         step_max=_optional(table, "step_max", where),
     )
     if not thruster.u_min <= 0.0 <= thruster.u_max or thruster.u_min == thruster.u_max:
-        raise ConfigError(f"{where}: need u_min <= 0 <= u_max, got {thruster.u_min}, {thruster.u_max}")
+        raise ConfigError(
+            f"{where}: need u_min <= 0 <= u_max, got {thruster.u_min}, {thruster.u_max}"
+        )
     if thruster.rate_max is not None and thruster.step_max is not None:
         raise ConfigError(f"{where}: give rate_max or step_max, not both")
     for key in ("rate_max", "step_max"):

@@ -25,6 +25,8 @@ import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+IntArray = npt.NDArray[np.intp]
 
 
 class MalformedMessage(ValueError):
@@ -34,7 +36,9 @@ class MalformedMessage(ValueError):
 def _finite_vector(name: str, value: object, length: int | None = None) -> FloatArray:
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim != 1 or (length is not None and arr.shape[0] != length):
-        raise MalformedMessage(f"{name}: expected a vector of length {length}, got shape {arr.shape}")
+        raise MalformedMessage(
+            f"{name}: expected a vector of length {length}, got shape {arr.shape}"
+        )
     if not np.all(np.isfinite(arr)):
         raise MalformedMessage(f"{name}: non-finite value in {arr.tolist()}")
     return arr

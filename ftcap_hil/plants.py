@@ -70,7 +70,9 @@ class SurfaceVessel:
         )
 
     def nu_dot(self, nu: FloatArray, tau: FloatArray) -> FloatArray:
-        return (tau - self.drag_and_coriolis(nu)) / np.array([self.mass_kg, self.mass_kg, self.iz_kgm2])
+        return (tau - self.drag_and_coriolis(nu)) / np.array(
+            [self.mass_kg, self.mass_kg, self.iz_kgm2]
+        )
 
     @staticmethod
     def eta_dot(eta: FloatArray, nu: FloatArray) -> FloatArray:
@@ -80,9 +82,13 @@ class SurfaceVessel:
     def step(self, x: FloatArray, tau: FloatArray, dt_s: float) -> FloatArray:
         """The paper's discrete model (forward Euler at T_s); the allocator's model."""
         eta, nu = x[:3], x[3:]
-        return np.concatenate([eta + dt_s * self.eta_dot(eta, nu), nu + dt_s * self.nu_dot(nu, tau)])
+        return np.concatenate(
+            [eta + dt_s * self.eta_dot(eta, nu), nu + dt_s * self.nu_dot(nu, tau)]
+        )
 
-    def step_rk4(self, x: FloatArray, tau: FloatArray, dt_s: float, substeps: int = 8) -> FloatArray:
+    def step_rk4(
+        self, x: FloatArray, tau: FloatArray, dt_s: float, substeps: int = 8
+    ) -> FloatArray:
         """A finer truth: RK4 with tau held constant over dt_s (zero-order hold)."""
         h = dt_s / substeps
 

@@ -28,8 +28,13 @@ from ftcap_hil.scenario import Scenario  # noqa: E402
 
 FIGSIZE = (10.0, 7.0)
 DPI = 100
-MODE_COLORS = {"none": "0.55", "cap": "tab:red", "ftcap": "tab:blue",
-               "ftcap-literal": "tab:orange", "oracle": "tab:green"}
+MODE_COLORS = {
+    "none": "0.55",
+    "cap": "tab:red",
+    "ftcap": "tab:blue",
+    "ftcap-literal": "tab:orange",
+    "oracle": "tab:green",
+}
 EXTRA_COLORS = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
 TRUTH = {"color": "black", "lw": 2.4, "alpha": 0.7, "zorder": 1}
 VESSEL_V = ("surge X", "sway Y", "yaw N")
@@ -88,7 +93,7 @@ def _grid(sc: Scenario, n: int, title: str, ncols: int = 1) -> tuple[Figure, lis
     for ax in flat[:n]:
         ax.grid(True, alpha=0.3)
         _fault_lines(ax, sc)
-    for ax in flat[max(0, n - ncols):n]:
+    for ax in flat[max(0, n - ncols) : n]:
         ax.set_xlabel(_time_label(sc))
     fig.suptitle(f"{sc.name}: {title}")
     return fig, flat[:n]
@@ -101,8 +106,13 @@ def _save(fig: Figure, path: Path) -> Path:
     return path
 
 
-def _overlay(axes: list[Axes], records: Records, key: Callable[[int], str],
-             runs: list[tuple[str, RunRecord]] | None = None, **kw: Any) -> None:
+def _overlay(
+    axes: list[Axes],
+    records: Records,
+    key: Callable[[int], str],
+    runs: list[tuple[str, RunRecord]] | None = None,
+    **kw: Any,
+) -> None:
     """For each axis i, plot column ``key(i)`` of every run in ``runs`` (default: all)."""
     modes = list(records)
     for name, rec in runs if runs is not None else list(records.items()):
@@ -178,8 +188,14 @@ def _limit_lines(ax: Axes, lo: float, hi: float) -> None:
     for v in shown:
         ax.axhline(v, color="black", ls="-.", lw=0.9, zorder=1)
     if len(shown) < 2:
-        ax.text(0.01, 0.04, f"limits [{lo:g}, {hi:g}]", transform=ax.transAxes, fontsize="small",
-                bbox={"fc": "white", "ec": "none", "alpha": 0.8})
+        ax.text(
+            0.01,
+            0.04,
+            f"limits [{lo:g}, {hi:g}]",
+            transform=ax.transAxes,
+            fontsize="small",
+            bbox={"fc": "white", "ec": "none", "alpha": 0.8},
+        )
 
 
 def plot_physical_inputs(records: Records, path: Path) -> Path:
@@ -221,8 +237,8 @@ def plot_bias(records: Records, path: Path) -> Path:
     m, k = sc.thrusters.m, sc.B.shape[0]
     ncols = max(m, k)
     fig, axes = _grid(sc, 2 * ncols, "bias estimates: f_hat_i (top), B f_hat (bottom)", ncols=ncols)
-    top, bottom = axes[:m], axes[ncols:ncols + k]
-    for ax in axes[m:ncols] + axes[ncols + k:]:
+    top, bottom = axes[:m], axes[ncols : ncols + k]
+    for ax in axes[m:ncols] + axes[ncols + k :]:
         ax.set_visible(False)
     for ax in top[k:]:  # nothing below them: show their time axis
         ax.xaxis.set_tick_params(labelbottom=True)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -38,7 +38,9 @@ class BoxQpSolution:
 class BoxQpSolver(Protocol):
     name: str
 
-    def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution: ...
+    def solve(
+        self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray
+    ) -> BoxQpSolution: ...
 
 
 def _checked(x: FloatArray, lo: FloatArray, hi: FloatArray, tol: float) -> bool:
@@ -56,7 +58,7 @@ class ProxqpBoxSolver:
         self._n = n
         self._eps_abs = eps_abs
         self._max_iter = max_iter
-        self._qp: object | None = None
+        self._qp: Any = None  # proxsuite.proxqp.dense.QP, untyped
         self._solved = proxqp.QPSolverOutput.PROXQP_SOLVED
 
     def _fresh(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> None:
@@ -73,8 +75,8 @@ class ProxqpBoxSolver:
 
     def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
         if self._qp is not None:
-            self._qp.update(H, g, None, None, None, None, None, lo, hi)  # type: ignore[attr-defined]
-            self._qp.solve()  # type: ignore[attr-defined]
+            self._qp.update(H, g, None, None, None, None, None, lo, hi)
+            self._qp.solve()
             sol = self._result(lo, hi)
             if sol.found:
                 return sol
@@ -87,7 +89,7 @@ class ProxqpBoxSolver:
         return sol
 
     def _result(self, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
-        res = self._qp.results  # type: ignore[attr-defined]
+        res = self._qp.results
         x = res.x.copy()
         found = res.info.status == self._solved and _checked(x, lo, hi, 1e-7)
         return BoxQpSolution(np.clip(x, lo, hi) if found else x, found, res.info.iter)
@@ -159,4 +161,6 @@ def make_solver(backend: str, n: int) -> BoxQpSolver:
     try:
         return _BACKENDS[backend](n)
     except KeyError:
-        raise ValueError(f"qp backend {backend!r}: unknown (choose from {available_backends()})") from None
+        raise ValueError(
+            f"qp backend {backend!r}: unknown (choose from {available_backends()})"
+        ) from None

@@ -58,21 +58,48 @@ class Recorder:
         self.rows: list[FloatArray] = []
 
     def add(
-        self, t: float, x: FloatArray, ref: FloatArray, v_dem: FloatArray, v_ach: FloatArray,
-        res: CycleResult, produced: FloatArray, truth: Truth, solve_s: float,
+        self,
+        t: float,
+        x: FloatArray,
+        ref: FloatArray,
+        v_dem: FloatArray,
+        v_ach: FloatArray,
+        res: CycleResult,
+        produced: FloatArray,
+        truth: Truth,
+        solve_s: float,
     ) -> None:
         est = res.estimate
-        row = np.concatenate([
-            [t], x, ref, v_dem, v_ach, res.u, produced, truth.delta, truth.f,
-            est.delta_hat, est.f_hat, est.bf_hat,
-            [est.innovation, est.window_len, res.allocation.status.value != "ok",
-             bool(np.any(res.probing)), solve_s * 1e6],
-        ])
+        row = np.concatenate(
+            [
+                [t],
+                x,
+                ref,
+                v_dem,
+                v_ach,
+                res.u,
+                produced,
+                truth.delta,
+                truth.f,
+                est.delta_hat,
+                est.f_hat,
+                est.bf_hat,
+                [
+                    est.innovation,
+                    est.window_len,
+                    res.allocation.status.value != "ok",
+                    bool(np.any(res.probing)),
+                    solve_s * 1e6,
+                ],
+            ]
+        )
         self.rows.append(row)
 
     def finish(self, **meta: Any) -> RunRecord:
         data = np.vstack(self.rows) if self.rows else np.zeros((0, len(self.names)))
-        return RunRecord(self.sc, self.mode, {n: data[:, i] for i, n in enumerate(self.names)}, meta)
+        return RunRecord(
+            self.sc, self.mode, {n: data[:, i] for i, n in enumerate(self.names)}, meta
+        )
 
 
 def write_csv(rec: RunRecord, path: Path) -> None:
@@ -125,7 +152,9 @@ def _settle(err: FloatArray, t: FloatArray, tol: float, start: float) -> float |
     return float(t[bad[-1] + 1] - start)
 
 
-def phase_metrics(rec: RunRecord, none: RunRecord | None, start: float, end: float) -> dict[str, Any]:
+def phase_metrics(
+    rec: RunRecord, none: RunRecord | None, start: float, end: float
+) -> dict[str, Any]:
     sc = rec.scenario
     t = rec.t
     sel = (t >= start) & (t < end)
@@ -133,9 +162,12 @@ def phase_metrics(rec: RunRecord, none: RunRecord | None, start: float, end: flo
     err = tracking_error(rec)[sel]
     track_tol = 0.02 if "x" in rec.columns else 0.1
     out: dict[str, Any] = {
-        "start": start, "end": end,
-        "tracking_rms": _rms(err), "tracking_max": float(np.max(err, initial=0.0)),
-        "settle_time": _settle(err, t[sel], track_tol, start), "settle_tol": track_tol,
+        "start": start,
+        "end": end,
+        "tracking_rms": _rms(err),
+        "tracking_max": float(np.max(err, initial=0.0)),
+        "settle_time": _settle(err, t[sel], track_tol, start),
+        "settle_tol": track_tol,
     }
     head = heading_error(rec)
     if head is not None:
@@ -150,9 +182,10 @@ def phase_metrics(rec: RunRecord, none: RunRecord | None, start: float, end: flo
     out["allocation_error_rms"] = _rms(np.linalg.norm(alloc, axis=1))
     dh, d = _stack(rec, "delta_hat", m)[sel], _stack(rec, "delta", m)[sel]
     out["delta_convergence_time"] = [
-        _settle(np.abs(dh[:, i] - d[:, i]), t[sel], CONVERGENCE_TOL + 1e-12, start) for i in range(m)
+        _settle(np.abs(dh[:, i] - d[:, i]), t[sel], CONVERGENCE_TOL + 1e-12, start)
+        for i in range(m)
     ]
-    out["delta_error_final"] = (np.abs(dh[-1] - d[-1]).tolist() if dh.size else [])
+    out["delta_error_final"] = np.abs(dh[-1] - d[-1]).tolist() if dh.size else []
     return out
 
 
@@ -162,8 +195,13 @@ def results(records: dict[str, RunRecord]) -> dict[str, Any]:
     any_rec = next(iter(records.values()))
     sc = any_rec.scenario
     out: dict[str, Any] = {
-        "schema": SCHEMA_VERSION, "scenario": sc.name, "time_unit": sc.time_unit,
-        "dt": sc.dt_s, "integrator": sc.integrator, "phases": sc.phases(), "modes": {},
+        "schema": SCHEMA_VERSION,
+        "scenario": sc.name,
+        "time_unit": sc.time_unit,
+        "dt": sc.dt_s,
+        "integrator": sc.integrator,
+        "phases": sc.phases(),
+        "modes": {},
     }
     for name, rec in records.items():
         state = np.column_stack([rec.columns[s] for s in sc.plant.state_labels])

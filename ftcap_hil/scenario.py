@@ -20,7 +20,13 @@ from ftcap_hil.controllers import PoseController, StateFeedback
 from ftcap_hil.core import CoreConfig, Mode, Truth
 from ftcap_hil.estimator import EstimatorConfig
 from ftcap_hil.excitation import ExcitationConfig
-from ftcap_hil.geometry import ConfigError, Thruster, ThrusterSet, effectiveness, thrusters_from_table
+from ftcap_hil.geometry import (
+    ConfigError,
+    Thruster,
+    ThrusterSet,
+    effectiveness,
+    thrusters_from_table,
+)
 from ftcap_hil.messages import FloatArray
 from ftcap_hil.plants import LinearPlant, SurfaceVessel
 
@@ -63,7 +69,9 @@ class FaultSchedule:
         return Truth(delta, f)
 
     def change_times(self) -> list[float]:
-        times = {ev.start for ev in self.events} | {ev.end for ev in self.events if math.isfinite(ev.end)}
+        times = {ev.start for ev in self.events} | {
+            ev.end for ev in self.events if math.isfinite(ev.end)
+        }
         return sorted(times)
 
 
@@ -144,7 +152,9 @@ def _dataclass_from(cls: type, table: dict[str, Any], where: str, **extra: Any) 
         raise ConfigError(f"{where}: {e}") from e
 
 
-def _plant(data: dict[str, Any], where: str) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, FloatArray]:
+def _plant(
+    data: dict[str, Any], where: str
+) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, FloatArray]:
     plant_t = _get(data, "plant", where)
     kind = _get(plant_t, "kind", f"{where}.plant")
     if kind == "linear":
@@ -152,16 +162,31 @@ def _plant(data: dict[str, Any], where: str) -> tuple[LinearPlant | SurfaceVesse
         b_v = _float(plant_t, "b_v", f"{where}.plant", 1.0)
         b_u = _vector(_get(plant_t, "b_u", f"{where}.plant"), f"{where}.plant.b_u")
         act = _get(data, "actuators", where)
-        lo, hi = _float(act, "u_min", f"{where}.actuators"), _float(act, "u_max", f"{where}.actuators")
+        lo, hi = (
+            _float(act, "u_min", f"{where}.actuators"),
+            _float(act, "u_max", f"{where}.actuators"),
+        )
         step = _float(act, "step_max", f"{where}.actuators", math.inf)
-        ths = ThrusterSet(tuple(
-            Thruster(f"U{i + 1}", 0.0, 0.0, 0.0, lo, hi, step_max=step if math.isfinite(step) else None)
-            for i in range(b_u.size)
-        ))
+        ths = ThrusterSet(
+            tuple(
+                Thruster(
+                    f"U{i + 1}",
+                    0.0,
+                    0.0,
+                    0.0,
+                    lo,
+                    hi,
+                    step_max=step if math.isfinite(step) else None,
+                )
+                for i in range(b_u.size)
+            )
+        )
         return LinearPlant(a=a, b_v=b_v), ths, b_u[None, :]
     if kind == "vessel":
         params: dict[str, Any] = {
-            k: _float(plant_t, k, f"{where}.plant") for k in plant_t if k not in ("kind", "inversion")
+            k: _float(plant_t, k, f"{where}.plant")
+            for k in plant_t
+            if k not in ("kind", "inversion")
         }
         if "inversion" in plant_t:
             params["inversion"] = plant_t["inversion"]
@@ -183,12 +208,15 @@ def _faults(entries: list[dict[str, Any]], m: int, where: str) -> FaultSchedule:
         bias = _vector(ev["bias"], f"{w}.bias", size) if "bias" in ev else None
         if delta is not None and np.any((delta < 0) | (delta > 1)):
             raise ConfigError(f"{w}.delta: must lie in [0, 1], got {ev['delta']!r}")
-        events.append(FaultEvent(
-            _float(ev, "from", w), _float(ev, "until", w) if "until" in ev else math.inf,
-            None if thr is None else thr - 1,
-            None if delta is None else (delta[0] if thr is not None else delta),
-            None if bias is None else (bias[0] if thr is not None else bias),
-        ))
+        events.append(
+            FaultEvent(
+                _float(ev, "from", w),
+                _float(ev, "until", w) if "until" in ev else math.inf,
+                None if thr is None else thr - 1,
+                None if delta is None else (delta[0] if thr is not None else delta),
+                None if bias is None else (bias[0] if thr is not None else bias),
+            )
+        )
     return FaultSchedule(m, tuple(events))
 
 
@@ -199,45 +227,72 @@ def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
     ctl_t = data.get("controller", {})
     if isinstance(plant, LinearPlant):
         controller: StateFeedback | PoseController = StateFeedback(
-            gain=_float(ctl_t, "K", f"{where}.controller", -0.6), a=plant.a, b_v=plant.b_v)
+            gain=_float(ctl_t, "K", f"{where}.controller", -0.6), a=plant.a, b_v=plant.b_v
+        )
         ref_len, x_len, unit = 1, 1, "step"
     else:
-        controller = PoseController(kp=_float(ctl_t, "kp", f"{where}.controller", 0.75),
-                                    k_eta=_float(ctl_t, "k_eta", f"{where}.controller", 0.63))
+        controller = PoseController(
+            kp=_float(ctl_t, "kp", f"{where}.controller", 0.75),
+            k_eta=_float(ctl_t, "k_eta", f"{where}.controller", 0.63),
+        )
         ref_len, x_len, unit = 3, 6, "s"
     refs = _get(data, "reference", where)
     reference = tuple(
-        Segment(_float(r, "from", f"{where}.reference[{i}]"),
-                _vector(_get(r, "value", f"{where}.reference[{i}]"), f"{where}.reference[{i}].value", ref_len))
+        Segment(
+            _float(r, "from", f"{where}.reference[{i}]"),
+            _vector(
+                _get(r, "value", f"{where}.reference[{i}]"),
+                f"{where}.reference[{i}].value",
+                ref_len,
+            ),
+        )
         for i, r in enumerate(refs)
     )
     mode_name = head.get("mode", "ftcap")
     try:
         mode = Mode(mode_name)
     except ValueError:
-        raise ConfigError(f"{where}.scenario.mode: {mode_name!r} not one of {[m.value for m in Mode]}") from None
+        raise ConfigError(
+            f"{where}.scenario.mode: {mode_name!r} not one of {[m.value for m in Mode]}"
+        ) from None
     core = CoreConfig(
         mode=mode,
         estimator=_dataclass_from(EstimatorConfig, data.get("estimator", {}), f"{where}.estimator"),
         allocator=_dataclass_from(AllocatorConfig, data.get("allocator", {}), f"{where}.allocator"),
-        excitation=_dataclass_from(ExcitationConfig, data.get("excitation", {}), f"{where}.excitation"),
+        excitation=_dataclass_from(
+            ExcitationConfig, data.get("excitation", {}), f"{where}.excitation"
+        ),
     )
     noise = data.get("noise", {}).get("state_std")
     integrator = head.get("integrator", "euler")
     if integrator not in ("euler", "rk4"):
-        raise ConfigError(f"{where}.scenario.integrator: expected 'euler' or 'rk4', got {integrator!r}")
+        raise ConfigError(
+            f"{where}.scenario.integrator: expected 'euler' or 'rk4', got {integrator!r}"
+        )
     x0 = _vector(head.get("x0", [0.0] * x_len), f"{where}.scenario.x0", x_len)
     dt = _float(head, "dt", f"{where}.scenario", 1.0 if unit == "step" else math.nan)
     if not dt > 0:
         raise ConfigError(f"{where}.scenario.dt: must be > 0, got {dt}")
     sc = Scenario(
-        name=str(head.get("name", where)), description=str(head.get("description", "")),
-        plant=plant, thrusters=ths, B=B, dt_s=dt, duration_s=_float(head, "duration", f"{where}.scenario"),
-        x0=x0, controller=controller, reference=reference,
-        faults=_faults(data.get("fault", []), ths.m, where), core=core,
-        integrator=integrator, rk4_substeps=int(head.get("rk4_substeps", 8)),
-        noise_std=np.zeros(x_len) if noise is None else _vector(noise, f"{where}.noise.state_std", x_len),
-        seed=int(head.get("seed", 0)), time_unit=unit,
+        name=str(head.get("name", where)),
+        description=str(head.get("description", "")),
+        plant=plant,
+        thrusters=ths,
+        B=B,
+        dt_s=dt,
+        duration_s=_float(head, "duration", f"{where}.scenario"),
+        x0=x0,
+        controller=controller,
+        reference=reference,
+        faults=_faults(data.get("fault", []), ths.m, where),
+        core=core,
+        integrator=integrator,
+        rk4_substeps=int(head.get("rk4_substeps", 8)),
+        noise_std=np.zeros(x_len)
+        if noise is None
+        else _vector(noise, f"{where}.noise.state_std", x_len),
+        seed=int(head.get("seed", 0)),
+        time_unit=unit,
     )
     if k != ref_len:
         raise ConfigError(f"{where}: B has {k} rows but the plant has {ref_len} virtual inputs")
@@ -248,7 +303,9 @@ SHIPPED = "ftcap_hil.data.scenarios"
 
 
 def shipped_scenarios() -> list[str]:
-    return sorted(p.name[:-5] for p in resources.files(SHIPPED).iterdir() if p.name.endswith(".toml"))
+    return sorted(
+        p.name[:-5] for p in resources.files(SHIPPED).iterdir() if p.name.endswith(".toml")
+    )
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
@@ -261,7 +318,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         text = resources.files(SHIPPED).joinpath(f"{name_or_path}.toml").read_bytes()
         where = str(name_or_path)
     else:
-        raise ConfigError(f"scenario {str(name_or_path)!r}: no such file or shipped scenario {shipped_scenarios()}")
+        raise ConfigError(
+            f"scenario {str(name_or_path)!r}: no such file or shipped scenario"
+            f" {shipped_scenarios()}"
+        )
     try:
         data = tomllib.loads(text.decode())
     except tomllib.TOMLDecodeError as e:

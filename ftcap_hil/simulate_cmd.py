@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -20,13 +21,23 @@ log = logging.getLogger("ftcap_hil.simulate")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scenario", help=f"a TOML file or a shipped scenario: {', '.join(shipped_scenarios())}")
+    p.add_argument(
+        "scenario", help=f"a TOML file or a shipped scenario: {', '.join(shipped_scenarios())}"
+    )
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--mode", choices=[m.value for m in Mode], help="one mode (plus the none reference)")
+    group.add_argument(
+        "--mode", choices=[m.value for m in Mode], help="one mode (plus the none reference)"
+    )
     group.add_argument("--compare", action="store_true", help="all modes (the default)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--integrator", choices=["euler", "rk4"], help="override the scenario's true plant")
-    p.add_argument("--inversion", choices=["euler", "trapezoid"], help="vessel: how the estimator inverts a step")
+    p.add_argument(
+        "--integrator", choices=["euler", "rk4"], help="override the scenario's true plant"
+    )
+    p.add_argument(
+        "--inversion",
+        choices=["euler", "trapezoid"],
+        help="vessel: how the estimator inverts a step",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -35,7 +46,7 @@ def summary_lines(res: dict) -> list[str]:  # type: ignore[type-arg]
     lines = [f"{res['scenario']}: phases {[(round(a, 2), round(b, 2)) for a, b in res['phases']]}"]
     for mode, r in res["modes"].items():
         phases = " | ".join(
-            f"dev {p.get('deviation_rms', float('nan')):.4f}/{p.get('deviation_max', float('nan')):.3f}"
+            f"dev {p.get('deviation_rms', math.nan):.4f}/{p.get('deviation_max', math.nan):.3f}"
             f" trk {p['tracking_rms']:.3f}"
             for p in r["phases"]
         )
@@ -53,7 +64,9 @@ def run(args: argparse.Namespace) -> int:
         if args.inversion:
             if not hasattr(sc.plant, "inversion"):
                 raise ConfigError("--inversion applies to the vessel plant only")
-            sc = dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, inversion=args.inversion))
+            sc = dataclasses.replace(
+                sc, plant=dataclasses.replace(sc.plant, inversion=args.inversion)
+            )
     except (ConfigError, ValueError) as e:
         print(f"ftcap-hil simulate: {e}", file=sys.stderr)
         return 2
@@ -69,5 +82,8 @@ def run(args: argparse.Namespace) -> int:
         write_plots(records, args.out)
     for line in summary_lines(res):
         print(line)
-    print(f"wrote {args.out}/results.json, {len(records)} timeseries.csv" + ("" if args.no_plots else " and plots"))
+    print(
+        f"wrote {args.out}/results.json, {len(records)} timeseries.csv"
+        + ("" if args.no_plots else " and plots")
+    )
     return 0

@@ -16,7 +16,7 @@ import numpy as np
 from ftcap_hil.core import FtcapCore, Mode
 from ftcap_hil.messages import FloatArray
 from ftcap_hil.plants import LinearPlant
-from ftcap_hil.report import RunRecord, Recorder
+from ftcap_hil.report import Recorder, RunRecord
 from ftcap_hil.scenario import FaultSchedule, Scenario
 
 

@@ -70,6 +70,8 @@ class Allocator:
         self._B = np.array(B, dtype=np.float64)
         self._u_min = thrusters.u_min
         self._u_max = thrusters.u_max
+        self._thrusters = thrusters
+        self._dt_s = dt_s
         self._step = thrusters.max_step(dt_s)
         u_range = np.maximum(np.abs(self._u_min), np.abs(self._u_max))
         self._qs = self.config.slack_weight / np.asarray(scale) ** 2
@@ -102,7 +104,13 @@ class Allocator:
         u_prev: FloatArray,
         u_pref: FloatArray | None = None,
         probe_limit: FloatArray | None = None,
+        dt_s: float | None = None,
     ) -> Allocation:
+        """u_prev: the command now on the actuators (centre of the rate box); dt_s: time
+        since it was sent, when it differs from the configured period."""
+        if dt_s is not None and dt_s != self._dt_s:
+            self._dt_s = dt_s
+            self._step = self._thrusters.max_step(dt_s)
         status = AllocationStatus.OK
         if not np.isfinite(tau_d).all():
             tau_d = np.zeros_like(bf_hat)

@@ -13,7 +13,7 @@ time (``applied`` overrides that, e.g. when the shell had to send zero).
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -110,19 +110,31 @@ class FtcapCore:
         tau_d: FloatArray,
         w: FloatArray | None,
         truth: Truth | None = None,
-        applied: FloatArray | None = None,
+        u_sample: FloatArray | None = None,
+        dt_s: float | None = None,
+        forced_dead: BoolArray | None = None,
     ) -> CycleResult:
-        """One cycle. tau_d (k,) demanded wrench; w (k,) measured actuator wrench over the
-        last step or None (stale telemetry: estimates frozen, allocation continues)."""
-        applied = self.u_prev if applied is None else applied
-        self._estimate = est = self._estimate_for(w, applied, truth)
+        """One cycle.
+
+        tau_d (k,): demanded wrench. w (k,): actuator wrench measured over the last
+        estimation interval, or None when there is no new sample (estimates held; the
+        excitation does not advance). u_sample (m,): the command that was acting over that
+        interval (its time average); defaults to the last command. dt_s: time since the last
+        cycle for the rate limits; defaults to the configured period.
+        """
+        u_sample = self.u_prev if u_sample is None else u_sample
+        self._estimate = est = self._estimate_for(w, u_sample, truth)
+        if forced_dead is not None and forced_dead.any():
+            est = replace(est, delta_hat=np.where(forced_dead, 0.0, est.delta_hat))
         dead = est.delta_hat < self.config.allocator.dead_threshold
         if self.config.mode is Mode.FTCAP:
-            exc = self.excitation(est.delta_hat, dead)
+            exc = self.excitation(est.delta_hat, dead, advance=w is not None)
             u_pref, probe = exc.u_pref, exc.probe_limit
         else:
             u_pref, probe = None, None
-        alloc = self.allocator.allocate(tau_d, est.delta_hat, est.bf_hat, applied, u_pref, probe)
+        alloc = self.allocator.allocate(
+            tau_d, est.delta_hat, est.bf_hat, self.u_prev, u_pref, probe, dt_s
+        )
         self.u_prev = alloc.u
         probing = np.zeros(self.m, dtype=bool) if probe is None else probe > 0
         return CycleResult(

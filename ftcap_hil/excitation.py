@@ -59,6 +59,7 @@ class Excitation:
         self._levels = np.zeros(m)
         self._zero = np.zeros(m)
         self._cached = np.zeros(m)
+        self._cached_level = -1
         self._cycle = 0
         self._basis_key: tuple[FloatArray, IntArray] | None = None
         self._basis = np.zeros((0, 0))
@@ -97,12 +98,17 @@ class Excitation:
             out[idx] = self.config.dither_amplitude * self._range[idx] * z / peak
         return out
 
-    def __call__(self, delta_hat: FloatArray, dead: BoolArray) -> ExcitationOutput:
-        """Excitation for this cycle; call once per cycle. The returned arrays are shared
-        between calls: treat them as read-only."""
+    def __call__(
+        self, delta_hat: FloatArray, dead: BoolArray, advance: bool = True
+    ) -> ExcitationOutput:
+        """Excitation for this cycle. ``advance``: a new estimation sample was taken, so the
+        sequence moves on (levels are held for whole estimation samples, whatever the
+        allocation rate). The returned arrays are shared: treat them as read-only."""
         cfg = self.config
-        if self._cycle % cfg.dither_period == 0:  # the PRBS level only changes here
+        level = self._cycle // cfg.dither_period
+        if level != self._cached_level:  # the PRBS level only changes here
             self._cached = self._null_dither(delta_hat, ~dead)
+            self._cached_level = level
         u_pref, limit = self._cached, self._zero
         if cfg.probe_interval and cfg.probe_amplitude and dead.any():
             phase = self._cycle % cfg.probe_interval
@@ -111,5 +117,6 @@ class Excitation:
                 amp = cfg.probe_amplitude * self._range
                 u_pref = np.where(dead, sign * amp, u_pref)
                 limit = np.where(dead, amp, 0.0)
-        self._cycle += 1
+        if advance:
+            self._cycle += 1
         return ExcitationOutput(u_pref, limit)

@@ -110,7 +110,10 @@ def command_bounds(
 
 
 def paper_four_thrusters(
-    l_m: float = 0.3, u_limit: float = 0.1, step_limit: float | None = 0.09
+    l_m: float = 0.3,
+    u_limit: float = 0.1,
+    step_limit: float | None = 0.09,
+    rate_limit: float | None = None,
 ) -> ThrusterSet:
     """The vessel of section 4.2: eq. (22) with alpha = pi/4.
 
@@ -121,9 +124,10 @@ def paper_four_thrusters(
     h = l_m / (2.0 * math.sqrt(2.0))
     q = math.pi / 4.0
     layout = [("T1", -h, h, q), ("T2", -h, -h, -q), ("T3", h, h, 3 * q), ("T4", h, -h, -3 * q)]
+    step = None if rate_limit is not None else step_limit
     return ThrusterSet(
         tuple(
-            Thruster(name, x, y, a, -u_limit, u_limit, step_max=step_limit)
+            Thruster(name, x, y, a, -u_limit, u_limit, rate_max=rate_limit, step_max=step)
             for name, x, y, a in layout
         )
     )
@@ -179,7 +183,8 @@ def thruster_from_table(table: dict[str, Any], where: str) -> Thruster:
 
 
 def thrusters_from_table(table: dict[str, Any], where: str = "vessel") -> ThrusterSet:
-    """A vessel table: either ``preset = "paper-4.2"`` (with optional l, u_limit, step_limit)
+    """A vessel table: either ``preset = "paper-4.2"`` (with optional l, u_limit, and
+    step_limit (N per allocator cycle, the paper's form) or rate_limit (N/s))
     or a list ``thruster = [{...}, ...]`` (TOML ``[[vessel.thruster]]``)."""
     preset = table.get("preset")
     if preset is not None:
@@ -189,6 +194,7 @@ def thrusters_from_table(table: dict[str, Any], where: str = "vessel") -> Thrust
             l_m=_optional(table, "l", where) or 0.3,
             u_limit=_optional(table, "u_limit", where) or 0.1,
             step_limit=_optional(table, "step_limit", where) or 0.09,
+            rate_limit=_optional(table, "rate_limit", where),
         )
     entries = table.get("thruster")
     if not isinstance(entries, list) or not entries:

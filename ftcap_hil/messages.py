@@ -131,12 +131,15 @@ class Mailbox(Generic[T]):
     received: int = 0
     malformed: int = 0
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    notify: threading.Event | None = None  # set on every put: wakes the loop early
 
     def put(self, value: T, stamp_ns: int | None = None) -> None:
         stamped = Stamped(value, time.monotonic_ns() if stamp_ns is None else stamp_ns)
         with self._lock:
             self._slot = stamped
             self.received += 1
+        if self.notify is not None:
+            self.notify.set()
 
     def count_malformed(self) -> None:
         with self._lock:
@@ -153,3 +156,31 @@ class Mailbox(Generic[T]):
             return math.inf
         now = time.monotonic_ns() if now_ns is None else now_ns
         return (now - slot.stamp_ns) * 1e-9
+
+
+@dataclass(frozen=True)
+class AllocatorStatus:
+    """What the daemon publishes (decimated) and answers to queries. SI units."""
+
+    mode: str
+    cycle: int
+    overruns: int
+    degraded: bool  # the last cycle used the fallback allocation
+    setpoint_stale: bool
+    telemetry_stale: bool
+    estimation_frozen: bool
+    delta_hat: tuple[float, ...]
+    f_hat: tuple[float, ...]
+    bf_hat: tuple[float, ...]
+    u: tuple[float, ...]
+    unallocated: tuple[float, ...]
+    saturated: tuple[bool, ...]
+    faulty: tuple[bool, ...]
+    esc_failed: tuple[bool, ...]
+    probing: tuple[bool, ...]
+    setpoint_age_s: float
+    telemetry_age_s: float
+    malformed: int  # malformed messages dropped, all ports
+
+    def as_dict(self) -> dict[str, object]:
+        return {f: getattr(self, f) for f in self.__dataclass_fields__}

@@ -141,7 +141,7 @@ def _vector(v: Any, where: str, length: int | None = None) -> FloatArray:
     return arr
 
 
-def _dataclass_from(cls: type, table: dict[str, Any], where: str, **extra: Any) -> Any:
+def dataclass_from_table(cls: type, table: dict[str, Any], where: str, **extra: Any) -> Any:
     known = {f.name for f in fields(cls)}
     unknown = set(table) - known
     if unknown:
@@ -152,7 +152,7 @@ def _dataclass_from(cls: type, table: dict[str, Any], where: str, **extra: Any) 
         raise ConfigError(f"{where}: {e}") from e
 
 
-def _plant(
+def plant_from_tables(
     data: dict[str, Any], where: str
 ) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, FloatArray]:
     plant_t = _get(data, "plant", where)
@@ -190,7 +190,7 @@ def _plant(
         }
         if "inversion" in plant_t:
             params["inversion"] = plant_t["inversion"]
-        vessel = _dataclass_from(SurfaceVessel, params, f"{where}.plant")
+        vessel = dataclass_from_table(SurfaceVessel, params, f"{where}.plant")
         ths = thrusters_from_table(_get(data, "vessel", where), f"{where}.vessel")
         return vessel, ths, effectiveness(ths)
     raise ConfigError(f"{where}.plant.kind: expected 'linear' or 'vessel', got {kind!r}")
@@ -222,7 +222,7 @@ def _faults(entries: list[dict[str, Any]], m: int, where: str) -> FaultSchedule:
 
 def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
     head = _get(data, "scenario", where)
-    plant, ths, B = _plant(data, where)
+    plant, ths, B = plant_from_tables(data, where)
     k = B.shape[0]
     ctl_t = data.get("controller", {})
     if isinstance(plant, LinearPlant):
@@ -257,9 +257,13 @@ def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
         ) from None
     core = CoreConfig(
         mode=mode,
-        estimator=_dataclass_from(EstimatorConfig, data.get("estimator", {}), f"{where}.estimator"),
-        allocator=_dataclass_from(AllocatorConfig, data.get("allocator", {}), f"{where}.allocator"),
-        excitation=_dataclass_from(
+        estimator=dataclass_from_table(
+            EstimatorConfig, data.get("estimator", {}), f"{where}.estimator"
+        ),
+        allocator=dataclass_from_table(
+            AllocatorConfig, data.get("allocator", {}), f"{where}.allocator"
+        ),
+        excitation=dataclass_from_table(
             ExcitationConfig, data.get("excitation", {}), f"{where}.excitation"
         ),
     )

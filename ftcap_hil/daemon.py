@@ -1,0 +1,377 @@
+"""The allocator daemon's loop: startup -> cycles on absolute deadlines -> shutdown.
+
+One thread (the caller of ``run``) owns the core. Bridges only fill mailboxes; the loop
+reads the latest values with their ages. A cycle runs at every deadline of the fixed rate,
+and also as soon as a new setpoint arrives (``wake_on_setpoint``: the latency from a
+setpoint to a thruster frame is then one cycle's work, not up to a period; the deadlines
+keep their phase). Each cycle:
+
+    setpoint (+ age) -> watchdog -> estimation sample from telemetry -> core.step
+    -> thruster command on CAN -> transitions logged -> status (decimated)
+
+Watchdogs: no setpoint for ``setpoint_timeout_s`` -> zero thrust; telemetry older than
+``telemetry_timeout_s`` -> estimation frozen, allocation continues; an ESC silent for
+``esc_timeout_s`` -> that thruster allocated as failed. On exit, always a zero command.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import signal
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
+
+import numpy as np
+
+from ftcap_hil.core import CoreConfig, CycleResult, FtcapCore, Mode
+from ftcap_hil.geometry import ThrusterSet
+from ftcap_hil.messages import (
+    AllocatorStatus,
+    BoolArray,
+    FloatArray,
+    Mailbox,
+    Odometry,
+    WrenchSetpoint,
+)
+from ftcap_hil.plants import SurfaceVessel
+
+log = logging.getLogger("ftcap_hil.daemon")
+
+
+class ThrusterSink(Protocol):
+    def send(self, u: FloatArray) -> bool: ...
+    def send_zero(self) -> bool: ...
+    def tick(self, now_ns: int | None = None) -> Any: ...
+
+
+class StatusSink(Protocol):
+    def publish(self, status: AllocatorStatus) -> None: ...
+    def announce(self, text: str, severity: str) -> None: ...
+
+
+@dataclass
+class Ports:
+    setpoints: list[Mailbox[WrenchSetpoint]]
+    telemetry: list[Mailbox[Odometry]]
+    thrusters: ThrusterSink
+    status: list[StatusSink] = field(default_factory=list)
+    esc_ages: Callable[[int], FloatArray] | None = None  # now_ns -> (m,) seconds
+
+
+@dataclass(frozen=True)
+class DaemonConfig:
+    thrusters: ThrusterSet
+    B: FloatArray
+    plant: SurfaceVessel
+    core: CoreConfig
+    rate_hz: float = 1.0 / 0.2827
+    estimation_period_s: float = 0.2827
+    setpoint_timeout_s: float = 1.0
+    telemetry_timeout_s: float = 1.0
+    esc_timeout_s: float = 0.5
+    status_period_s: float = 0.1
+    wake_on_setpoint: bool = True
+    dt_clamp: tuple[float, float] = (0.2, 5.0)  # dt for rate limits, in periods (PX4 clamps)
+
+
+def _latest(boxes: Sequence[Mailbox[Any]]) -> tuple[Any, int]:
+    """The freshest value over several mailboxes and its stamp (None, -1 if none yet)."""
+    best, stamp = None, -1
+    for box in boxes:
+        slot = box.latest()
+        if slot is not None and slot.stamp_ns > stamp:
+            best, stamp = slot.value, slot.stamp_ns
+    return best, stamp
+
+
+class CommandHistory:
+    """Commands with the time they went out, to average u over a telemetry interval."""
+
+    def __init__(self, horizon_s: float) -> None:
+        self._items: deque[tuple[int, FloatArray]] = deque()
+        self._horizon_ns = int(horizon_s * 1e9)
+
+    def add(self, stamp_ns: int, u: FloatArray) -> None:
+        self._items.append((stamp_ns, u))
+        while len(self._items) > 2 and self._items[1][0] < stamp_ns - self._horizon_ns:
+            self._items.popleft()
+
+    def mean(self, t0_ns: int, t1_ns: int) -> FloatArray | None:
+        """Time-weighted mean of the piecewise-constant command over [t0, t1]."""
+        if t1_ns <= t0_ns or not self._items or self._items[0][0] > t0_ns:
+            return None
+        acc, total = None, 0
+        items = list(self._items)
+        for i, (start, u) in enumerate(items):
+            end = items[i + 1][0] if i + 1 < len(items) else t1_ns
+            lo, hi = max(start, t0_ns), min(end, t1_ns)
+            if hi > lo:
+                acc = u * (hi - lo) if acc is None else acc + u * (hi - lo)
+                total += hi - lo
+        return None if acc is None else acc / total
+
+
+class AllocatorDaemon:
+    def __init__(self, config: DaemonConfig, ports: Ports) -> None:
+        self.config = config
+        self.ports = ports
+        self.period_ns = int(1e9 / config.rate_hz)
+        self.core = self._make_core(config.core)
+        self.should_exit = False
+        self.cycles = 0
+        self.overruns = 0
+        self.not_sent = 0  # commands the sink refused (bus errors)
+        self._wake = threading.Event()
+        if config.wake_on_setpoint:
+            for box in ports.setpoints:
+                box.notify = self._wake
+        self._history = CommandHistory(horizon_s=10 * config.estimation_period_s + 5.0)
+        self._est_sample: tuple[int, Odometry] | None = None  # (receive stamp, odometry)
+        self._last_cycle_ns: int | None = None
+        self._last_status_ns = 0
+        self._flags: dict[str, Any] = {}
+        self._pending: list[Callable[[], None]] = []
+        self._pending_lock = threading.Lock()
+        self._last: CycleResult | None = None
+        self._saved_handlers: dict[int, Any] = {}
+        self.last_status: AllocatorStatus | None = None
+
+    def _make_core(self, core_cfg: CoreConfig) -> FtcapCore:
+        dt = 1.0 / self.config.rate_hz
+        return FtcapCore(self.config.B, self.config.thrusters, dt, core_cfg)
+
+    # --- called from other threads -----------------------------------------------------
+
+    def call_in_loop(self, fn: Callable[[], None]) -> None:
+        """Run fn in the loop thread before the next cycle (parameter changes)."""
+        with self._pending_lock:
+            self._pending.append(fn)
+        self._wake.set()
+
+    def request_exit(self, *_: object) -> None:
+        self.should_exit = True
+        self._wake.set()
+
+    def set_mode(self, mode: Mode) -> None:
+        """Rebuild the core in another mode, keeping what is on the thrusters."""
+        u_prev = self.core.u_prev
+        self.config = replace(self.config, core=replace(self.config.core, mode=mode))
+        self.core = self._make_core(self.config.core)
+        self.core.reset_command(u_prev)
+
+    # --- the loop ----------------------------------------------------------------------
+
+    def install_signal_handlers(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._saved_handlers[sig] = signal.signal(sig, self.request_exit)
+
+    def restore_signal_handlers(self) -> None:
+        for sig, handler in self._saved_handlers.items():
+            signal.signal(sig, handler)
+        self._saved_handlers.clear()
+
+    def run(self, max_cycles: int | None = None) -> int:
+        self.install_signal_handlers()
+        try:
+            self.ports.thrusters.send_zero()
+            next_deadline = time.monotonic_ns() + self.period_ns
+            while not self.should_exit and (max_cycles is None or self.cycles < max_cycles):
+                timeout = (next_deadline - time.monotonic_ns()) * 1e-9
+                if timeout > 0 and self._wake.wait(timeout):
+                    self._wake.clear()
+                    if self.should_exit:
+                        break
+                now = time.monotonic_ns()
+                self._run_pending()
+                self.cycle(now)
+                if now >= next_deadline:
+                    next_deadline += self.period_ns
+                    done = time.monotonic_ns()
+                    if done > next_deadline:  # this cycle ran past the next deadline
+                        missed = (done - next_deadline) // self.period_ns + 1
+                        self.overruns += int(missed)
+                        next_deadline += int(missed) * self.period_ns
+        finally:
+            self.shutdown()
+        return 0
+
+    def shutdown(self) -> None:
+        """Zero thrust, whatever happened. Idempotent."""
+        try:
+            self.ports.thrusters.send_zero()
+        finally:
+            self.restore_signal_handlers()
+
+    def _run_pending(self) -> None:
+        with self._pending_lock:
+            pending, self._pending = self._pending, []
+        for fn in pending:
+            fn()
+
+    # --- one cycle ---------------------------------------------------------------------
+
+    def cycle(self, now: int) -> CycleResult | None:
+        cfg = self.config
+        self.cycles += 1
+        dt = None
+        if self._last_cycle_ns is not None:
+            period = self.period_ns * 1e-9
+            lo, hi = cfg.dt_clamp
+            dt = min(max((now - self._last_cycle_ns) * 1e-9, lo * period), hi * period)
+        self._last_cycle_ns = now
+        setpoint, sp_stamp = _latest(self.ports.setpoints)
+        sp_age = math.inf if sp_stamp < 0 else (now - sp_stamp) * 1e-9
+        odom, tel_stamp = _latest(self.ports.telemetry)
+        tel_age = math.inf if tel_stamp < 0 else (now - tel_stamp) * 1e-9
+        tel_stale = tel_age > cfg.telemetry_timeout_s
+        esc_failed = self._esc_failed(now)
+        self._transition(
+            "telemetry_stale",
+            tel_stale,
+            "telemetry stale: estimation frozen",
+            "telemetry recovered",
+        )
+        sp_stale = sp_age > cfg.setpoint_timeout_s
+        self._transition(
+            "setpoint_stale",
+            sp_stale,
+            "setpoint timeout: zero thrust",
+            "setpoint received: allocating",
+        )
+        w, u_sample = (None, None) if tel_stale else self._estimation_sample(odom, tel_stamp)
+        if sp_stale:
+            result = None
+            self._send(np.zeros(self.core.m), now)
+            self.core.reset_command()
+        else:
+            result = self.core.step(
+                setpoint.tau, w, u_sample=u_sample, dt_s=dt, forced_dead=esc_failed
+            )
+            self._send(result.u, now)
+            self._report_transitions(result, esc_failed)
+            self._last = result
+        self.ports.thrusters.tick(now)
+        if now - self._last_status_ns >= cfg.status_period_s * 1e9:
+            self._last_status_ns = now
+            self._publish(sp_age, tel_age, sp_stale, tel_stale, esc_failed)
+        return result
+
+    def _send(self, u: FloatArray, now: int) -> None:
+        if not np.isfinite(u).all():  # cannot happen (the allocator clips), never on the bus
+            log.error("non-finite command %s replaced by zero", u)
+            u = np.zeros_like(u)
+        if not self.ports.thrusters.send(u):
+            self.not_sent += 1
+        self._history.add(now, u)
+
+    def _esc_failed(self, now: int) -> BoolArray | None:
+        if self.ports.esc_ages is None:
+            return None
+        failed = self.ports.esc_ages(now) > self.config.esc_timeout_s
+        for i, f in enumerate(failed):
+            self._transition(
+                f"esc{i + 1}",
+                bool(f),
+                f"ESC {i + 1} silent: thruster failed",
+                f"ESC {i + 1} reporting again",
+            )
+        return failed
+
+    def _estimation_sample(self, odom: Odometry | None, stamp: int) -> tuple[Any, Any]:
+        """w over the last estimation interval and the mean command over it, once per
+        ``estimation_period_s`` of telemetry; (None, None) in between."""
+        if odom is None:
+            return None, None
+        prev = self._est_sample
+        if prev is None:
+            self._est_sample = (stamp, odom)
+            return None, None
+        if stamp == prev[0] or (stamp - prev[0]) * 1e-9 < 0.999 * self.config.estimation_period_s:
+            return None, None
+        self._est_sample = (stamp, odom)
+        dt = odom.time_s - prev[1].time_s
+        if not (math.isfinite(dt) and dt > 0):
+            dt = (stamp - prev[0]) * 1e-9
+        u_mean = self._history.mean(prev[0], stamp)
+        if u_mean is None:
+            return None, None
+        x0 = np.concatenate([prev[1].eta, prev[1].nu])
+        x1 = np.concatenate([odom.eta, odom.nu])
+        return self.config.plant.measured_wrench(x0, x1, dt), u_mean
+
+    def _transition(self, key: str, value: bool, on: str, off: str) -> None:
+        old = self._flags.get(key, False)
+        if value != old:
+            self._flags[key] = value
+            self._announce(on if value else off, "warning" if value else "info")
+
+    def _report_transitions(self, r: CycleResult, esc_failed: BoolArray | None) -> None:
+        for i, faulty in enumerate(r.faulty):
+            d = r.estimate.delta_hat[i]
+            self._transition(
+                f"fault{i + 1}",
+                bool(faulty),
+                f"thruster {i + 1} fault detected: delta_hat {d:.2f}",
+                f"thruster {i + 1} fault cleared: delta_hat {d:.2f}",
+            )
+        degraded = r.allocation.status.value != "ok"
+        self._transition(
+            "degraded",
+            degraded,
+            f"allocation degraded: {r.allocation.status.value}",
+            "allocation nominal",
+        )
+
+    def _announce(self, text: str, severity: str) -> None:
+        getattr(log, "warning" if severity == "warning" else "info")(text)
+        for sink in self.ports.status:
+            sink.announce(text, severity)
+
+    def status(
+        self,
+        sp_age: float,
+        tel_age: float,
+        sp_stale: bool,
+        tel_stale: bool,
+        esc_failed: BoolArray | None,
+    ) -> AllocatorStatus:
+        r, m = self._last, self.core.m
+        est = r.estimate if r is not None else None
+
+        def tup(a: Any, default: float | bool = 0.0) -> tuple[Any, ...]:
+            return tuple(a.tolist()) if a is not None else (default,) * m
+
+        return AllocatorStatus(
+            mode=self.config.core.mode.value,
+            cycle=self.cycles,
+            overruns=self.overruns,
+            degraded=bool(self._flags.get("degraded", False)),
+            setpoint_stale=sp_stale,
+            telemetry_stale=tel_stale,
+            estimation_frozen=tel_stale and self.config.core.mode.estimates,
+            delta_hat=tup(est.delta_hat if est else None, 1.0),
+            f_hat=tup(est.f_hat if est else None),
+            bf_hat=tuple(est.bf_hat.tolist()) if est else (0.0,) * self.core.k,
+            u=tup(self.core.u_prev),
+            unallocated=tuple(r.allocation.unallocated.tolist()) if r else (0.0,) * self.core.k,
+            saturated=tup(r.allocation.saturated if r else None, False),
+            faulty=tup(r.faulty if r else None, False),
+            esc_failed=tup(esc_failed, False),
+            probing=tup(r.probing if r else None, False),
+            setpoint_age_s=sp_age,
+            telemetry_age_s=tel_age,
+            malformed=sum(b.malformed for b in [*self.ports.setpoints, *self.ports.telemetry]),
+        )
+
+    def _publish(self, *args: Any) -> None:
+        st = self.status(*args)
+        self.last_status = st
+        for sink in self.ports.status:
+            sink.publish(st)

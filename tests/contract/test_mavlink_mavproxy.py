@@ -1,0 +1,147 @@
+"""Interop: MAVProxy, standing in for the ground station on its inbox port, lists and sets the
+allocator's parameters and injects a failure into the vessel.
+
+MAVProxy runs headless (no display, loopback only) as
+``mavproxy.py --master udp:127.0.0.1:PORT --default-modules=param,cmdlong,misc --no-state``
+with commands on stdin; ``udp:`` makes it bind PORT, which both links list as a peer.
+Skipped when MAVProxy is not installed (``pip install MAVProxy``).
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from bridges.mavlink_allocator import AllocatorLinkConfig, MavlinkAllocatorLink
+from bridges.mavlink_config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink_params import ParamSpec, ParamType
+from bridges.mavlink_vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
+from ftcap_hil.messages import FaultInjection, FaultKind
+from tests.contract.test_mavlink_support import free_udp_ports, no_leaked_threads, wait_until
+
+MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
+pytestmark = [
+    pytest.mark.timeout(90),
+    pytest.mark.usefixtures("no_leaked_threads"),
+    pytest.mark.skipif(not MAVPROXY.exists(), reason="MAVProxy is not installed"),
+]
+__all__ = ["no_leaked_threads"]
+
+
+class MavproxySession:
+    """MAVProxy as a child process, driven through stdin, its stdout read by one thread."""
+
+    def __init__(self, port: int, target: tuple[int, int], cwd: Path) -> None:
+        env = {**os.environ, "HOME": str(cwd), "PYTHONUNBUFFERED": "1"}
+        self.proc = subprocess.Popen(
+            [
+                sys.executable, str(MAVPROXY), f"--master=udp:127.0.0.1:{port}",
+                "--default-modules=param,cmdlong,misc", "--no-state", "--mav20",
+                f"--target-system={target[0]}", f"--target-component={target[1]}",
+            ],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            text=True, cwd=cwd, env=env,
+        )  # fmt: skip
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.transcript: list[str] = []
+        self._reader = threading.Thread(target=self._read, name="mavproxy-stdout", daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.put(line.rstrip())
+
+    def command(self, line: str) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+
+    def expect(self, pattern: str, timeout_s: float = 10.0) -> str:
+        regex = re.compile(pattern)
+        deadline = time.monotonic() + timeout_s
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                line = self.lines.get(timeout=left)
+            except queue.Empty:
+                break
+            self.transcript.append(line)
+            if regex.search(line):
+                return line
+        raise AssertionError(
+            f"MAVProxy never printed {pattern!r}; got:\n" + "\n".join(self.transcript)
+        )
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            assert self.proc.stdin is not None
+            self.proc.stdin.close()  # EOF on stdin is MAVProxy's clean exit
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+        self._reader.join(5)
+
+
+@pytest.fixture
+def system(tmp_path) -> Iterator[tuple[MavproxySession, MavlinkAllocatorLink, MavlinkVesselLink]]:
+    gcs_port, allocator_port, vessel_port = free_udp_ports(3)
+    params = [
+        ParamSpec("ALLOC_W_U", 1.0, min=0.0, max=10.0),
+        ParamSpec("ALLOC_HORIZON", 4, ParamType.INT, 1, 50),
+    ]
+    config = AllocatorLinkConfig(n_thrusters=4, max_wrench=(100.0, 50.0, 200.0))
+    allocator_ep = MavlinkEndpoint.inbox(allocator_port, ALLOCATOR_IDS, (gcs_port,))
+    vessel_ep = MavlinkEndpoint.inbox(vessel_port, VESSEL_IDS, (allocator_port, gcs_port))
+    with (
+        MavlinkAllocatorLink(config, allocator_ep, params) as allocator,
+        MavlinkVesselLink(4, vessel_ep) as vessel,
+    ):
+        session = MavproxySession(gcs_port, ALLOCATOR_IDS, tmp_path)
+        try:
+            yield session, allocator, vessel
+        finally:
+            session.close()
+    assert session.proc.returncode is not None
+
+
+def test_mavproxy_sets_allocator_params_and_injects_a_vessel_failure(system) -> None:
+    mavproxy, allocator, vessel = system
+    mavproxy.expect(r"Detected vehicle 1:191", timeout_s=30)
+    mavproxy.expect(r"Received 2 parameters")  # MAVProxy fetches the table on connect
+
+    mavproxy.command("param set ALLOC_W_U 2.5")
+    assert wait_until(lambda: allocator.params.get("ALLOC_W_U") == 2.5)
+    mavproxy.command("param set ALLOC_HORIZON 12")
+    assert wait_until(lambda: allocator.params.get("ALLOC_HORIZON") == 12)
+    mavproxy.command("param set ALLOC_W_U 50")
+    mavproxy.expect(r"ALLOC_W_U not set: 50 outside \[0, 10\]")  # our STATUSTEXT
+    mavproxy.command("param show ALLOC*")
+    mavproxy.expect(r"ALLOC_W_U\s+2\.5")
+    assert allocator.params.values() == {"ALLOC_W_U": 2.5, "ALLOC_HORIZON": 12.0}
+
+    mavproxy.command("set target_component 1")
+    mavproxy.command("param fetch")
+    mavproxy.expect(r"Received 1 parameters")
+    mavproxy.command("long INJECT_FAILURE 101 1 3")
+    mavproxy.expect(r"INJECT_FAILURE: DENIED")  # SYS_FAILURE_EN is 0 by default
+    mavproxy.command(f"param set {FAILURE_ENABLE_PARAM} 1")
+    assert wait_until(lambda: vessel.fault_injection_enabled)
+    mavproxy.command("long INJECT_FAILURE 101 1 3")
+    mavproxy.expect(r"INJECT_FAILURE: ACCEPTED")
+    assert [s.value.index for s in vessel.drain_faults()] == [2]
+
+    mavproxy.command("long INJECT_FAILURE 101 5 0 0.5")  # SLOW on all -> WEAK, delta 0.5
+    mavproxy.expect(r"INJECT_FAILURE: ACCEPTED")
+    faults = [s.value for s in vessel.drain_faults()]
+    assert faults == [FaultInjection(i, FaultKind.WEAK, 0.5) for i in range(4)]

@@ -1,0 +1,129 @@
+"""Helpers for the MAVLink contract tests (no tests here).
+
+The far end of every contract test is bare pymavlink (``RawPeer``) with the ftcap dialect,
+on real loopback UDP: never our own transport pretending to be the other side.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+
+from pymavlink import mavutil  # noqa: E402
+
+from bridges import mavlink_dialect  # noqa: E402
+
+DIALECT = mavlink_dialect.load()
+
+
+def free_udp_ports(n: int) -> list[int]:
+    """``n`` distinct UDP ports free on 127.0.0.1 right now."""
+    socks = []
+    try:
+        for _ in range(n):
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s.bind(("127.0.0.1", 0))
+            socks.append(s)
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+class RawPeer:
+    """A bare pymavlink endpoint; one receive loop that keeps every message (no drops)."""
+
+    def __init__(self, connection: str, ids: tuple[int, int] = (255, 190)) -> None:
+        self.conn = mavutil.mavlink_connection(
+            connection, source_system=ids[0], source_component=ids[1]
+        )
+        self.conn.mav = DIALECT.MAVLink(self.conn, srcSystem=ids[0], srcComponent=ids[1])
+        self.conn.mav.robust_parsing = True
+        self.conn.WIRE_PROTOCOL_VERSION = "2.0"
+        self.conn.first_byte = False
+        self.mav = self.conn.mav
+        self.received: list[Any] = []
+
+    def pump(self, timeout_s: float) -> None:
+        """Receive everything that arrives within ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            msg = self.conn.recv_msg()
+            if msg is None:
+                self.conn.select(0.01)
+            elif msg.get_type() != "BAD_DATA":
+                self.received.append(msg)
+
+    def wait_for(
+        self,
+        mtype: str,
+        predicate: Callable[[Any], bool] = lambda m: True,
+        timeout_s: float = 3.0,
+        since: int = 0,
+    ) -> Any | None:
+        """First message of ``mtype`` (index >= ``since``) matching ``predicate``."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            for msg in self.received[since:]:
+                if msg.get_type() == mtype and predicate(msg):
+                    return msg
+            if time.monotonic() > deadline:
+                return None
+            self.pump(0.02)
+
+    def of_type(self, mtype: str, since: int = 0) -> list[Any]:
+        return [m for m in self.received[since:] if m.get_type() == mtype]
+
+    def close(self) -> None:
+        self.conn.close()
+
+    def __enter__(self) -> RawPeer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def send_datagram(port: int, payload: bytes) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.sendto(payload, ("127.0.0.1", port))
+
+
+def wait_until(predicate: Callable[[], bool], timeout_s: float = 3.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
+
+
+def _mavlink_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name.startswith("mavlink-")]
+
+
+@pytest.fixture
+def no_leaked_threads() -> Iterator[None]:
+    """Fails the test if a link's dispatch thread outlives it."""
+    yield
+    wait_until(lambda: not _mavlink_threads(), 3.0)
+    assert not _mavlink_threads(), f"leaked: {_mavlink_threads()}"
+
+
+@contextlib.contextmanager
+def closing_all(*things: Any) -> Iterator[None]:
+    try:
+        yield
+    finally:
+        for thing in things:
+            with contextlib.suppress(Exception):
+                (thing.shutdown if hasattr(thing, "shutdown") else thing.close)()

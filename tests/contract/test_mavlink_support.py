@@ -6,7 +6,6 @@ on real loopback UDP: never our own transport pretending to be the other side.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import socket
 import threading
@@ -117,13 +116,3 @@ def no_leaked_threads() -> Iterator[None]:
     yield
     wait_until(lambda: not _mavlink_threads(), 3.0)
     assert not _mavlink_threads(), f"leaked: {_mavlink_threads()}"
-
-
-@contextlib.contextmanager
-def closing_all(*things: Any) -> Iterator[None]:
-    try:
-        yield
-    finally:
-        for thing in things:
-            with contextlib.suppress(Exception):
-                (thing.shutdown if hasattr(thing, "shutdown") else thing.close)()

@@ -3,6 +3,8 @@
     u = argmin  || B Delta_hat u + b_hat - tau_d ||^2_Qs  +  || u - u_pref ||^2_Ru
         s.t.    u in Omega(u_prev)    (amplitude box  intersected with  rate box, eq. 2)
 
+A demand more than 10 times the achievable wrench is shrunk along its own direction
+first (the result is the same saturated allocation; 1e300 N no longer reaches the solver).
 Qs = slack_weight / S^2 and Ru = effort_weight / u_range^2 keep the weights dimensionless;
 slack_weight >> effort_weight makes the wrench equation of eq. (13) nearly hard, so a
 feasible demand is met to ~effort_weight/slack_weight relative accuracy and an infeasible
@@ -24,6 +26,10 @@ import numpy as np
 from ftcap_hil.geometry import ThrusterSet, command_bounds
 from ftcap_hil.messages import BoolArray, FloatArray
 from ftcap_hil.qp import make_solver
+
+
+_MAX_DEMAND = 10.0  # |tau_d - b_hat| / S beyond this is scaled down before the QP: the
+# allocation is the same (saturated towards that direction) and the QP stays well scaled.
 
 
 class AllocationStatus(enum.Enum):
@@ -71,20 +77,33 @@ class Allocator:
         self._u_min = thrusters.u_min
         self._u_max = thrusters.u_max
         self._thrusters = thrusters
-        self._dt_s = dt_s
-        self._step = thrusters.max_step(dt_s)
+        self._step = thrusters.max_step(dt_s)  # for the configured period
+        self._step_at: tuple[float, FloatArray] = (dt_s, self._step)  # last other dt
         u_range = np.maximum(np.abs(self._u_min), np.abs(self._u_max))
-        self._qs = self.config.slack_weight / np.asarray(scale) ** 2
-        self._ru = self.config.effort_weight / u_range**2
+        self._scale = np.asarray(scale, dtype=np.float64)
+        self._u_range = u_range
         self._solver = make_solver(self.config.backend, self._B.shape[1])
+        self.retune(self.config)
         self._tol = 1e-9 * (u_range + 1.0)  # "at a bound" for the saturation flags
+
+    def retune(self, config: AllocatorConfig) -> None:
+        """New weights / dead threshold, same solver workspace (the backend is fixed)."""
+        if config.backend != self.config.backend:
+            raise ValueError("allocator.backend cannot change on a running allocator")
+        self.config = config
+        self._qs = config.slack_weight / self._scale**2
+        self._ru = config.effort_weight / self._u_range**2
 
     @property
     def backend(self) -> str:
         return self._solver.name
 
     def bounds(
-        self, u_prev: FloatArray, dead: BoolArray, probe_limit: FloatArray | None = None
+        self,
+        u_prev: FloatArray,
+        dead: BoolArray,
+        probe_limit: FloatArray | None = None,
+        step: FloatArray | None = None,
     ) -> tuple[FloatArray, FloatArray]:
         """Omega(u_prev) with dead thrusters held at 0 (or within +-probe_limit when probed)."""
         live = ~dead
@@ -94,7 +113,7 @@ class Allocator:
             probing = dead & (probe_limit > 0)
             u_min = np.where(probing, np.maximum(self._u_min, -probe_limit), u_min)
             u_max = np.where(probing, np.minimum(self._u_max, probe_limit), u_max)
-        return command_bounds(u_min, u_max, self._step, u_prev)
+        return command_bounds(u_min, u_max, self._step if step is None else step, u_prev)
 
     def allocate(
         self,
@@ -108,20 +127,25 @@ class Allocator:
     ) -> Allocation:
         """u_prev: the command now on the actuators (centre of the rate box); dt_s: time
         since it was sent, when it differs from the configured period."""
-        if dt_s is not None and dt_s != self._dt_s:
-            self._dt_s = dt_s
-            self._step = self._thrusters.max_step(dt_s)
+        step = self._step
+        if dt_s is not None:
+            if dt_s != self._step_at[0]:
+                self._step_at = (dt_s, self._thrusters.max_step(dt_s))
+            step = self._step_at[1]
         status = AllocationStatus.OK
         if not np.isfinite(tau_d).all():
             tau_d = np.zeros_like(bf_hat)
             status = AllocationStatus.INVALID_DEMAND
         dead = delta_hat < self.config.dead_threshold
         if dead.any():
-            lo, hi = self.bounds(u_prev, dead, probe_limit)
+            lo, hi = self.bounds(u_prev, dead, probe_limit, step)
         else:
-            lo, hi = command_bounds(self._u_min, self._u_max, self._step, u_prev)
+            lo, hi = command_bounds(self._u_min, self._u_max, step, u_prev)
         beff = self._B * delta_hat[None, :]
         target = tau_d - bf_hat
+        excess = np.abs(target / self._scale).max()
+        if excess > _MAX_DEMAND:  # keep the direction, drop the absurd magnitude
+            target = target * (_MAX_DEMAND / excess)
         H = beff.T @ (self._qs[:, None] * beff)
         H.flat[:: H.shape[0] + 1] += self._ru
         g = beff.T @ (self._qs * target)

@@ -6,8 +6,10 @@ Call order per cycle t (Algorithm 1 of the paper):
     result = core.step(tau_d(t), w)                  # w = None when telemetry is stale
     send(result.u)
 
-``step`` assumes that the command applied over the last step is the one it returned last
-time (``applied`` overrides that, e.g. when the shell had to send zero).
+``step`` assumes that the command acting over the last estimation interval is the one it
+returned last time (``u_sample`` overrides that: the daemon passes the time average of what
+it sent). The centre of the rate box is always the last command (``reset_command`` sets it,
+e.g. after the shell had to send zero).
 """
 
 from __future__ import annotations
@@ -143,8 +145,20 @@ class FtcapCore:
             alloc,
             est.delta_hat < self.config.fault_threshold,
             probing,
-            estimation_frozen=self.config.mode.estimates and w is None,
+            estimation_frozen=self.config.mode.estimates
+            and (w is None or not bool(np.isfinite(w).all())),
         )
+
+    def retune(
+        self, allocator: AllocatorConfig | None = None, excitation: ExcitationConfig | None = None
+    ) -> None:
+        """Change allocation weights / excitation without touching the estimator's state."""
+        if allocator is not None:
+            self.allocator.retune(allocator)
+            self.config = replace(self.config, allocator=allocator)
+        if excitation is not None:
+            self.excitation.config = excitation
+            self.config = replace(self.config, excitation=excitation)
 
     def reset_command(self, u: FloatArray | None = None) -> None:
         """Tell the core what is on the actuators now (e.g. zero after a watchdog stop)."""

@@ -136,6 +136,7 @@ class AllocatorDaemon:
         self._last_status_ns = 0
         self._flags: dict[str, Any] = {}
         self._pending: list[Callable[[], None]] = []
+        self.before_cycle: list[Callable[[], None]] = []  # hooks run in the loop thread
         self._pending_lock = threading.Lock()
         self._last: CycleResult | None = None
         self._saved_handlers: dict[int, Any] = {}
@@ -190,6 +191,8 @@ class AllocatorDaemon:
                         break
                 now = time.monotonic_ns()
                 self._run_pending()
+                for hook in self.before_cycle:
+                    hook()
                 self.cycle(now)
                 if now >= next_deadline:
                     next_deadline += self.period_ns

@@ -106,7 +106,9 @@ class Excitation:
         allocation rate). The returned arrays are shared: treat them as read-only."""
         cfg = self.config
         level = self._cycle // cfg.dither_period
-        if level != self._cached_level:  # the PRBS level only changes here
+        # The PRBS level only changes at period boundaries; a change of the dead set must
+        # not leave a stale dither on a thruster that has just been taken out.
+        if level != self._cached_level or (self._cached[dead] != 0.0).any():
             self._cached = self._null_dither(delta_hat, ~dead)
             self._cached_level = level
         u_pref, limit = self._cached, self._zero

@@ -190,11 +190,20 @@ def thrusters_from_table(table: dict[str, Any], where: str = "vessel") -> Thrust
     if preset is not None:
         if preset != "paper-4.2":
             raise ConfigError(f"{where}.preset: unknown preset {preset!r} (known: 'paper-4.2')")
+        unknown = set(table) - {"preset", "l", "u_limit", "step_limit", "rate_limit"}
+        if unknown:
+            raise ConfigError(f"{where}: unknown keys {sorted(unknown)} for the paper-4.2 preset")
+        values = {"l": 0.3, "u_limit": 0.1, "step_limit": 0.09}
+        for key in ("l", "u_limit", "step_limit", "rate_limit"):
+            if key in table:
+                values[key] = _number(table, key, where)
+                if values[key] <= 0.0:
+                    raise ConfigError(f"{where}.{key}: must be > 0, got {values[key]}")
         return paper_four_thrusters(
-            l_m=_optional(table, "l", where) or 0.3,
-            u_limit=_optional(table, "u_limit", where) or 0.1,
-            step_limit=_optional(table, "step_limit", where) or 0.09,
-            rate_limit=_optional(table, "rate_limit", where),
+            l_m=values["l"],
+            u_limit=values["u_limit"],
+            step_limit=values["step_limit"],
+            rate_limit=values.get("rate_limit"),
         )
     entries = table.get("thruster")
     if not isinstance(entries, list) or not entries:

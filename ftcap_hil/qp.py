@@ -51,7 +51,7 @@ def _checked(x: FloatArray, lo: FloatArray, hi: FloatArray, tol: float) -> bool:
 class ProxqpBoxSolver:
     name = "proxqp"
 
-    def __init__(self, n: int, eps_abs: float = 1e-9, max_iter: int = 200) -> None:
+    def __init__(self, n: int, eps_abs: float = 1e-9, max_iter: int = 1000) -> None:
         from proxsuite import proxqp
 
         self._proxqp = proxqp
@@ -68,6 +68,11 @@ class ProxqpBoxSolver:
         qp.settings.eps_abs = self._eps_abs
         qp.settings.eps_rel = 0.0
         qp.settings.max_iter = self._max_iter
+        qp.settings.max_iter_in = 200  # default 1500 inner iterations per outer one
+        # Without the duality-gap check a warm start whose old x and multipliers still pass
+        # the residual tests after a bounds-only update is reported solved at iteration 0
+        # (a rate-limited ramp then freezes): found by tests/unit.
+        qp.settings.check_duality_gap = True
         qp.settings.verbose = False
         qp.init(H, g, None, None, None, None, None, lo, hi)
         qp.solve()

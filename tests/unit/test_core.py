@@ -112,11 +112,6 @@ def test_cap_stale_telemetry_is_not_frozen_estimation() -> None:
     assert not r.estimation_frozen
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="core.FtcapCore.step: a non-finite w freezes the estimate (_estimate_for returns "
-    "the previous one) but estimation_frozen is computed as `w is None`, so it reports False",
-)
 def test_non_finite_telemetry_reports_frozen() -> None:
     core = make(Mode.FTCAP)
     before = run(core, 30)[-1].estimate
@@ -178,11 +173,6 @@ def test_column_count_mismatch_raises() -> None:
         FtcapCore(B[:, :3], THS, DT_S)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="allocator.Allocator.allocate stores a given dt_s in self._dt_s/self._step, so a "
-    "later call with dt_s=None keeps the last dt_s instead of the configured period",
-)
 def test_dt_s_default_is_the_configured_period() -> None:
     ths = paper_four_thrusters(rate_limit=0.5)
     core = FtcapCore(effectiveness(ths), ths, 0.1, CoreConfig(mode=Mode.CAP))
@@ -192,12 +182,6 @@ def test_dt_s_default_is_the_configured_period() -> None:
     np.testing.assert_allclose(np.abs(r.u), 0.06, atol=1e-9)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="qp.ProxqpBoxSolver: after update() with only the box changed, the warm start "
-    "(previous x and z) passes proxqp's residual checks at iteration 0 (no duality-gap "
-    "check), so the stale x is returned as solved and the command stops ramping",
-)
 def test_constant_demand_ramps_to_optimum_with_default_backend() -> None:
     ths = paper_four_thrusters(rate_limit=0.318359)  # the HIL config: 0.09 N per T_s
     Bp = effectiveness(ths)

@@ -258,12 +258,6 @@ def test_empty_thruster_list_names_key() -> None:
         thrusters_from_table({"thruster": []})
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="geometry.thrusters_from_table: the preset branch does not validate l / u_limit / "
-    "step_limit / rate_limit; negative values give u_min > u_max or a negative step, and 0 is "
-    "silently replaced by the default through `_optional(...) or default`",
-)
 @pytest.mark.parametrize(
     ("key", "value"),
     [("u_limit", -0.1), ("step_limit", -0.09), ("rate_limit", -1.0), ("l", 0.0), ("u_limit", 0.0)],

@@ -27,7 +27,6 @@ from ftcap_hil.geometry import ThrusterSet, command_bounds
 from ftcap_hil.messages import BoolArray, FloatArray
 from ftcap_hil.qp import make_solver
 
-
 _MAX_DEMAND = 10.0  # |tau_d - b_hat| / S beyond this is scaled down before the QP: the
 # allocation is the same (saturated towards that direction) and the QP stays well scaled.
 

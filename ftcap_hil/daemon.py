@@ -141,6 +141,7 @@ class AllocatorDaemon:
         self._last: CycleResult | None = None
         self._saved_handlers: dict[int, Any] = {}
         self.last_status: AllocatorStatus | None = None
+        self._tau_d = np.zeros(config.B.shape[0])
 
     def _make_core(self, core_cfg: CoreConfig) -> FtcapCore:
         dt = 1.0 / self.config.rate_hz
@@ -251,9 +252,11 @@ class AllocatorDaemon:
         w, u_sample = (None, None) if tel_stale else self._estimation_sample(odom, tel_stamp)
         if sp_stale:
             result = None
+            self._tau_d = np.zeros(self.core.k)
             self._send(np.zeros(self.core.m), now)
             self.core.reset_command()
         else:
+            self._tau_d = setpoint.tau
             result = self.core.step(
                 setpoint.tau, w, u_sample=u_sample, dt_s=dt, forced_dead=esc_failed
             )
@@ -363,6 +366,7 @@ class AllocatorDaemon:
             f_hat=tup(est.f_hat if est else None),
             bf_hat=tuple(est.bf_hat.tolist()) if est else (0.0,) * self.core.k,
             u=tup(self.core.u_prev),
+            tau_demand=tuple(self._tau_d.tolist()),
             unallocated=tuple(r.allocation.unallocated.tolist()) if r else (0.0,) * self.core.k,
             saturated=tup(r.allocation.saturated if r else None, False),
             faulty=tup(r.faulty if r else None, False),

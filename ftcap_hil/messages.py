@@ -173,6 +173,7 @@ class AllocatorStatus:
     f_hat: tuple[float, ...]
     bf_hat: tuple[float, ...]
     u: tuple[float, ...]
+    tau_demand: tuple[float, ...]
     unallocated: tuple[float, ...]
     saturated: tuple[bool, ...]
     faulty: tuple[bool, ...]

@@ -362,6 +362,14 @@ def run(args: argparse.Namespace) -> int:
             len(ports.telemetry),
         )
         code = daemon.run()
+        if daemon.reaction_ns:
+            r = np.array(daemon.reaction_ns) * 1e-3
+            log.info(
+                "setpoint received -> command sent: median %.0f us, p99 %.0f us (n=%d)",
+                np.median(r),
+                np.percentile(r, 99),
+                r.size,
+            )
         log.info(
             "allocator: stopped after %d cycles, %d overruns, %d commands refused by the bus",
             daemon.cycles,

@@ -60,9 +60,6 @@ class RawCommandTap(can.Listener):
         self, t0: int, differs_from: tuple[int, ...] | None
     ) -> tuple[int, tuple[int, ...]] | None:
         with self.lock:
-            for t, raw in reversed(self.frames):
-                if t < t0:
-                    break
             for t, raw in self.frames:
                 if t >= t0 and raw != differs_from:
                     return t, raw

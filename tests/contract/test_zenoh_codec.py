@@ -1,0 +1,248 @@
+"""The Zenoh payload encoding: literal payloads, round trips, and what the decoders refuse."""
+
+from __future__ import annotations
+
+import enum
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from bridges.zenoh_codec import (
+    MAX_PAYLOAD_BYTES,
+    AllocatorStatus,
+    ZenohKeys,
+    decode_fault_injection,
+    decode_odometry,
+    decode_status,
+    decode_thruster_command,
+    decode_wrench_setpoint,
+    encode_fault_injection,
+    encode_odometry,
+    encode_status,
+    encode_thruster_command,
+    encode_wrench_setpoint,
+)
+from ftcap_hil.messages import (
+    FaultInjection,
+    FaultKind,
+    MalformedMessage,
+    Odometry,
+    ThrusterCommand,
+    WrenchSetpoint,
+)
+
+
+def status_four_thrusters(**changes: object) -> AllocatorStatus:
+    values: dict[str, object] = dict(
+        mode="normal",
+        cycle=1200,
+        overruns=3,
+        degraded=False,
+        delta_hat=np.array([1.0, 0.98, 0.0, 1.0]),
+        f_hat=np.array([0.0, 0.0, 12.5, 0.0]),
+        bf_hat=np.array([12.5, 0.0, -3.0]),
+        u=np.array([100.0, -50.0, 0.0, 25.0]),
+        tau_unallocated=np.array([0.0, 1.5, 0.0]),
+        saturated=(False, True, False, False),
+        port_age_s={"setpoint": 0.012, "odometry": math.inf},
+        stale={"setpoint": False, "odometry": True},
+    )
+    values.update(changes)
+    return AllocatorStatus.from_mapping(values)
+
+
+def test_keys_of_a_vessel() -> None:
+    keys = ZenohKeys.for_vessel("cybership2")
+    assert keys.setpoint_wrench == "ftcap/cybership2/setpoint/wrench"
+    assert keys.odometry == "ftcap/cybership2/telemetry/odometry"
+    assert keys.thruster_command == "ftcap/cybership2/thrusters/command"
+    assert keys.status == "ftcap/cybership2/allocator/status"
+    assert keys.state == "ftcap/cybership2/allocator/state"
+    assert keys.fault_inject == "ftcap/cybership2/fault/inject"
+
+
+@pytest.mark.parametrize("name", ["", "a/b", "ship*", "**", "my ship", "$x"])
+def test_vessel_name_must_be_one_plain_key_chunk(name: str) -> None:
+    with pytest.raises(ValueError, match="vessel name"):
+        ZenohKeys.for_vessel(name)
+
+
+def test_documented_setpoint_payload_decodes() -> None:
+    msg = decode_wrench_setpoint(b'{"v":1,"X_N":1200.0,"Y_N":0.0,"N_Nm":-350.0}')
+    np.testing.assert_array_equal(msg.tau, [1200.0, 0.0, -350.0])
+
+
+def test_setpoint_encodes_to_named_si_fields() -> None:
+    payload = encode_wrench_setpoint(WrenchSetpoint.checked([10, -2.5, 3]))
+    assert json.loads(payload) == {"v": 1, "X_N": 10.0, "Y_N": -2.5, "N_Nm": 3.0}
+
+
+def test_odometry_round_trip_and_unknown_time_is_null() -> None:
+    odom = Odometry.checked([10.0, -4.0, 0.5], [1.2, 0.1, -0.02], time_s=42.5)
+    back = decode_odometry(encode_odometry(odom))
+    np.testing.assert_array_equal(back.eta, odom.eta)
+    np.testing.assert_array_equal(back.nu, odom.nu)
+    assert back.time_s == 42.5
+    untimed = encode_odometry(Odometry.checked([0, 0, 0], [0, 0, 0]))
+    assert json.loads(untimed)["time_s"] is None
+    assert math.isnan(decode_odometry(untimed).time_s)
+
+
+def test_thruster_command_round_trip_and_length_check() -> None:
+    payload = encode_thruster_command(ThrusterCommand.checked([1.0, -2.0, 3.5]))
+    assert json.loads(payload) == {"v": 1, "u_N": [1.0, -2.0, 3.5]}
+    np.testing.assert_array_equal(decode_thruster_command(payload, m=3).u, [1.0, -2.0, 3.5])
+    with pytest.raises(MalformedMessage, match="u_N"):
+        decode_thruster_command(payload, m=4)
+
+
+@pytest.mark.parametrize(
+    "fault",
+    [
+        FaultInjection(0, FaultKind.OFF),
+        FaultInjection(3, FaultKind.WEAK, 0.4),
+        FaultInjection(1, FaultKind.BIAS, -20.0),
+        FaultInjection(2, FaultKind.STUCK),
+        FaultInjection(2, FaultKind.OK),
+    ],
+)
+def test_fault_injection_round_trip(fault: FaultInjection) -> None:
+    back = decode_fault_injection(encode_fault_injection(fault), m=4)
+    assert (back.index, back.kind) == (fault.index, fault.kind)
+    assert back.value == fault.value or (math.isnan(back.value) and math.isnan(fault.value))
+
+
+def test_status_round_trip_keeps_every_field() -> None:
+    status = status_four_thrusters()
+    back = decode_status(encode_status(status))
+    for name in ("mode", "cycle", "overruns", "degraded", "saturated", "port_age_s", "stale"):
+        assert getattr(back, name) == getattr(status, name), name
+    for name in ("delta_hat", "f_hat", "bf_hat", "u", "tau_unallocated"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(status, name), err_msg=name)
+
+
+def test_status_payload_names_wrenches_and_nulls_infinite_ages() -> None:
+    class Mode(enum.Enum):
+        DEGRADED = "degraded"
+
+    obj = json.loads(encode_status(status_four_thrusters(mode=Mode.DEGRADED)))
+    assert obj["mode"] == "degraded"
+    assert obj["bf_hat"] == {"X_N": 12.5, "Y_N": 0.0, "N_Nm": -3.0}
+    assert obj["port_age_s"] == {"setpoint": 0.012, "odometry": None}
+    assert obj["f_hat_N"] == [0.0, 0.0, 12.5, 0.0]
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"u": np.zeros(3)},
+        {"saturated": (False,) * 5},
+        {"delta_hat": np.array([1.0, math.nan, 1.0, 1.0])},
+        {"bf_hat": np.zeros(2)},
+    ],
+)
+def test_status_encoder_refuses_inconsistent_status(changes: dict[str, object]) -> None:
+    with pytest.raises(MalformedMessage):
+        encode_status(status_four_thrusters(**changes))
+
+
+def test_encoders_refuse_non_finite_values() -> None:
+    with pytest.raises(MalformedMessage):
+        encode_wrench_setpoint(WrenchSetpoint(np.array([1.0, math.nan, 0.0])))
+    with pytest.raises(MalformedMessage):
+        encode_thruster_command(ThrusterCommand(np.array([math.inf])))
+    with pytest.raises(MalformedMessage):
+        encode_fault_injection(FaultInjection(0, FaultKind.BIAS, math.inf))
+
+
+BAD_SETPOINTS = [
+    b"",
+    b"\xff\xfe",
+    b"garbage",
+    b"[1, 2, 3]",
+    b'{"X_N":1,"Y_N":2,"N_Nm":3}',  # no version
+    b'{"v":2,"X_N":1,"Y_N":2,"N_Nm":3}',
+    b'{"v":true,"X_N":1,"Y_N":2,"N_Nm":3}',
+    b'{"v":1,"X_N":1,"Y_N":2}',
+    b'{"v":1,"X_N":NaN,"Y_N":2,"N_Nm":3}',
+    b'{"v":1,"X_N":Infinity,"Y_N":2,"N_Nm":3}',
+    b'{"v":1,"X_N":1e999,"Y_N":2,"N_Nm":3}',
+    b'{"v":1,"X_N":"1","Y_N":2,"N_Nm":3}',
+    b'{"v":1,"X_N":true,"Y_N":2,"N_Nm":3}',
+    b'{"v":1,"X_N":null,"Y_N":2,"N_Nm":3}',
+    b'{"v":1,"X_N":[1],"Y_N":2,"N_Nm":3}',
+]
+
+
+@pytest.mark.parametrize("payload", BAD_SETPOINTS)
+def test_setpoint_decoder_refuses(payload: bytes) -> None:
+    with pytest.raises(MalformedMessage):
+        decode_wrench_setpoint(payload)
+
+
+def test_decoders_refuse_oversized_payloads() -> None:
+    with pytest.raises(MalformedMessage, match="bytes"):
+        decode_thruster_command(b" " * (MAX_PAYLOAD_BYTES + 1))
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b'{"v":1,"u_N":[]}',
+        b'{"v":1,"u_N":[1,2,"3"]}',
+        b'{"v":1,"u_N":[1,true]}',
+        b'{"v":1,"u_N":[1,[2]]}',
+        b'{"v":1,"u_N":[1,1e999]}',
+        b'{"v":1,"u_N":7}',
+    ],
+)
+def test_thruster_command_decoder_refuses(payload: bytes) -> None:
+    with pytest.raises(MalformedMessage, match="u_N"):
+        decode_thruster_command(payload)
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b'{"v":1,"index":0,"kind":"explode"}',
+        b'{"v":1,"index":-1,"kind":"off"}',
+        b'{"v":1,"index":1.0,"kind":"off"}',
+        b'{"v":1,"index":true,"kind":"off"}',
+        b'{"v":1,"index":9,"kind":"off"}',  # m = 4
+        b'{"v":1,"index":0,"kind":"weak","value":1.5}',
+        b'{"v":1,"index":0,"kind":"bias","value":"10"}',
+        b'{"v":1,"kind":"off"}',
+    ],
+)
+def test_fault_decoder_refuses(payload: bytes) -> None:
+    with pytest.raises(MalformedMessage):
+        decode_fault_injection(payload, m=4)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("u_N", [1.0, 2.0]),
+        ("saturated", [0, 1, 0, 0]),
+        ("degraded", "no"),
+        ("cycle", -1),
+        ("port_age_s", {"setpoint": -0.5}),
+        ("stale", {"setpoint": 1}),
+        ("bf_hat", [0.0, 0.0, 0.0]),
+        ("mode", 3),
+    ],
+)
+def test_status_decoder_refuses(field: str, value: object) -> None:
+    obj = json.loads(encode_status(status_four_thrusters()))
+    obj[field] = value
+    with pytest.raises(MalformedMessage, match=field):
+        decode_status(json.dumps(obj).encode())
+
+
+def test_pure_modules_do_not_import_zenoh() -> None:
+    code = "import sys, bridges.zenoh_codec, bridges.zenoh_config; sys.exit('zenoh' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0

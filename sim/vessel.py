@@ -1,0 +1,378 @@
+"""The simulated vessel: true state, thrusters, true faults, command watchdog, ESC telemetry.
+
+Pure: no I/O, no clock. The process shell (``sim.vessel_cmd``) feeds it commands with their
+receive stamps, fault injections, and steps it on its own deadlines.
+
+Per step of length ``dt_s`` (sim time), with the faults and command held over the step::
+
+    u     = clip(command, u_min, u_max)        if the command is fresh, else 0   (m,) N
+    F     = delta * u + f                      produced force per thruster       (m,) N
+    tau   = B F                                body-frame [X, Y, N]              (3,)
+    x    <- SurfaceVessel.step_rk4(x, tau, dt_s)        x = [north, east, psi, u, v, r]
+                                               psi then wrapped to (-pi, pi]
+
+Watchdog: a command older than ``command_timeout_s`` (on the caller's clock, the one the
+stamps come from: wall time even when the sim runs faster than real time) is dropped and the
+thrusters get zero, like real ESCs that lose their input; faults still act, so a stuck
+thruster keeps pushing its bias.
+
+True faults, per thruster: the scenario ``FaultSchedule`` at the current sim time, overridden
+by live injections (``FaultInjection``, latest wins per thruster and per quantity)::
+
+    OK    -> (delta, f) = (1, 0)
+    OFF   -> (0, 0)
+    STUCK -> (0, value), NaN value = the force the thruster produced in the last step
+    WEAK  -> (value, 0), NaN value = ``default_weak_delta``
+    BIAS  -> (delta unchanged, value), NaN value = ``default_bias_n``
+
+An ESC can be made silent (``silent`` windows, ``set_silent``): its thruster still works, its
+telemetry stops; that is how the allocator's ESC-timeout path is exercised.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ftcap_hil.core import Truth
+from ftcap_hil.geometry import ConfigError, ThrusterSet
+from ftcap_hil.messages import BoolArray, EscStatus, FaultInjection, FaultKind, FloatArray
+from ftcap_hil.plants import SurfaceVessel, wrap_angle
+from ftcap_hil.scenario import FaultSchedule
+from sim.esc_model import DEFAULT_ESC, EscModel
+
+
+@dataclass(frozen=True)
+class SilentWindow:
+    """ESC ``thruster`` (0-based) sends nothing for ``start_s <= t < end_s`` (sim time)."""
+
+    thruster: int
+    start_s: float = 0.0
+    end_s: float = math.inf
+
+
+@dataclass(frozen=True)
+class VesselSimConfig:
+    plant: SurfaceVessel
+    thrusters: ThrusterSet
+    B: FloatArray  # (3, m)
+    x0: FloatArray = field(default_factory=lambda: np.zeros(6))  # [north, east, psi, u, v, r]
+    command_timeout_s: float = 0.5
+    schedule: FaultSchedule | None = None
+    silent: tuple[SilentWindow, ...] = ()
+    esc: EscModel = DEFAULT_ESC
+    default_weak_delta: float = 0.5
+    default_bias_n: float = 0.08
+    rk4_substeps: int = 8
+
+
+@dataclass(frozen=True)
+class SimSample:
+    """The state at ``t_s`` and what acted over the step that ended there (SI, (m,) arrays)."""
+
+    t_s: float
+    x: FloatArray  # (6,) [north, east, psi, u, v, r]
+    u: FloatArray  # command applied (after the watchdog and amplitude clip), N
+    command_fresh: bool
+    command_age_s: float  # inf: no command ever
+    produced: FloatArray  # F = delta u + f, N
+    tau: FloatArray  # (3,) B F
+    delta: FloatArray
+    f: FloatArray
+    silent: BoolArray
+
+
+class VesselSim:
+    """See the module docstring. ``now_s`` / ``stamp_s`` share the caller's clock."""
+
+    def __init__(self, config: VesselSimConfig) -> None:
+        m = config.thrusters.m
+        if config.B.shape != (3, m):
+            raise ValueError(f"B: expected shape (3, {m}), got {config.B.shape}")
+        if config.schedule is not None and config.schedule.m != m:
+            raise ValueError(f"fault schedule for {config.schedule.m} thrusters, vessel has {m}")
+        self.config = config
+        self.m = m
+        self._x = np.array(config.x0, dtype=np.float64)
+        self._t_s = 0.0
+        self._command = np.zeros(m)
+        self._command_stamp_s = -math.inf
+        self._delta_override = np.full(m, np.nan)  # NaN: follow the schedule
+        self._f_override = np.full(m, np.nan)
+        self._silent_override: list[bool | None] = [None] * m
+        self._produced = np.zeros(m)
+        self._responding = np.ones(m, dtype=bool)
+
+    @property
+    def t_s(self) -> float:
+        return self._t_s
+
+    @property
+    def x(self) -> FloatArray:
+        return self._x.copy()
+
+    # --- inputs ---
+
+    def set_command(self, u: FloatArray, stamp_s: float) -> None:
+        """The latest thruster command (m,) N, received at ``stamp_s``; clipped to limits."""
+        u = np.asarray(u, dtype=np.float64)
+        if u.shape != (self.m,) or not np.all(np.isfinite(u)):
+            raise ValueError(f"command: expected {self.m} finite forces, got {u.tolist()}")
+        ths = self.config.thrusters
+        self._command = np.clip(u, ths.u_min, ths.u_max)
+        self._command_stamp_s = stamp_s
+
+    def inject(self, fault: FaultInjection) -> None:
+        """Apply a live injection (module docstring). ValueError for a bad index or value."""
+        i, value = fault.index, fault.value
+        if not 0 <= i < self.m:
+            raise ValueError(f"fault injection: thruster index {i} not in 0..{self.m - 1}")
+        if math.isinf(value):
+            raise ValueError(f"fault injection: infinite value for thruster {i}")
+        given = not math.isnan(value)
+        if fault.kind is FaultKind.OK:
+            self._delta_override[i], self._f_override[i] = 1.0, 0.0
+        elif fault.kind is FaultKind.OFF:
+            self._delta_override[i], self._f_override[i] = 0.0, 0.0
+        elif fault.kind is FaultKind.STUCK:
+            self._delta_override[i] = 0.0
+            self._f_override[i] = value if given else self._produced[i]
+        elif fault.kind is FaultKind.WEAK:
+            delta = value if given else self.config.default_weak_delta
+            if not 0.0 <= delta <= 1.0:
+                raise ValueError(f"fault injection: WEAK delta {delta} not in [0, 1]")
+            self._delta_override[i], self._f_override[i] = delta, 0.0
+        else:  # BIAS
+            self._f_override[i] = value if given else self.config.default_bias_n
+
+    def set_silent(self, index: int, silent: bool | None) -> None:
+        """Force ESC ``index`` silent (True) or reporting (False); None: follow the windows."""
+        self._silent_override[index] = silent
+
+    # --- truth ---
+
+    def faults(self) -> Truth:
+        """True (delta, f) acting now: schedule at ``t_s`` overridden by injections."""
+        if self.config.schedule is not None:
+            base = self.config.schedule.at(self._t_s)
+            delta, f = base.delta, base.f
+        else:
+            delta, f = np.ones(self.m), np.zeros(self.m)
+        return Truth(
+            np.where(np.isnan(self._delta_override), delta, self._delta_override),
+            np.where(np.isnan(self._f_override), f, self._f_override),
+        )
+
+    def silent(self) -> BoolArray:
+        out = np.zeros(self.m, dtype=bool)
+        for w in self.config.silent:
+            if w.start_s <= self._t_s < w.end_s:
+                out[w.thruster] = True
+        for i, forced in enumerate(self._silent_override):
+            if forced is not None:
+                out[i] = forced
+        return out
+
+    # --- dynamics ---
+
+    def command_age_s(self, now_s: float) -> float:
+        return now_s - self._command_stamp_s
+
+    def step(self, dt_s: float, now_s: float) -> SimSample:
+        """Integrate ``dt_s`` of sim time; the watchdog compares stamps with ``now_s``."""
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise ValueError(f"dt_s: expected a finite positive step, got {dt_s}")
+        age = self.command_age_s(now_s)
+        fresh = age <= self.config.command_timeout_s
+        u = self._command.copy() if fresh else np.zeros(self.m)
+        truth = self.faults()
+        silent = self.silent()
+        produced = truth.delta * u + truth.f
+        tau = self.config.B @ produced
+        self._x = self.config.plant.step_rk4(self._x, tau, dt_s, self.config.rk4_substeps)
+        self._x[2] = float(wrap_angle(self._x[2]))  # psi in (-pi, pi], as telemetry reports it
+        self._t_s += dt_s
+        self._produced = produced
+        self._responding = truth.delta > 0.0
+        return SimSample(
+            self._t_s, self._x.copy(), u, fresh, age, produced, tau, truth.delta, truth.f, silent
+        )
+
+    def esc_statuses(self) -> list[EscStatus]:
+        """Telemetry of the last step's produced forces, for the ESCs that are not silent."""
+        return self.config.esc.statuses(self._produced, self._responding, ~self.silent())
+
+
+# --- helpers of the process shell (pure) ---
+
+
+class Decimator:
+    """True on the steps where an ``out_hz`` stream is due in a ``rate_hz`` loop (step 0 too)."""
+
+    def __init__(self, rate_hz: float, out_hz: float) -> None:
+        self._ratio = min(out_hz / rate_hz, 1.0)
+        self._step = 0
+
+    def due(self) -> bool:
+        k = self._step
+        self._step += 1
+        return k == 0 or math.floor(k * self._ratio) > math.floor((k - 1) * self._ratio)
+
+
+def record_header(names: list[str]) -> list[str]:
+    """Columns of the ``--record`` CSV; per-thruster columns use the thruster names."""
+    per = [(f"u_{n}_N", f"F_{n}_N", f"delta_{n}", f"f_{n}_N", f"silent_{n}") for n in names]
+    grouped = [col for k in range(5) for col in (p[k] for p in per)]
+    head = ["time_s", "monotonic_s", "north_m", "east_m", "psi_rad", "u_mps", "v_mps", "r_radps"]
+    return [*head, "command_fresh", "command_age_s", *grouped, "tau_X_N", "tau_Y_N", "tau_N_Nm"]
+
+
+def record_row(s: SimSample, monotonic_s: float) -> list[Any]:
+    row: list[Any] = [f"{s.t_s:.6f}", f"{monotonic_s:.6f}", *s.x.tolist()]
+    row += [int(s.command_fresh), s.command_age_s]
+    for arr in (s.u, s.produced, s.delta, s.f):
+        row += arr.tolist()
+    return row + s.silent.astype(int).tolist() + s.tau.tolist()
+
+
+# --- configuration: the [sim] and [esc] tables (pure; the shell reads the file) ---
+
+SIM_KEYS = {
+    "rate_hz", "telemetry_rate_hz", "esc_status_rate_hz", "command_timeout_s",
+    "realtime_factor", "rk4_substeps", "x0", "fault_injection_enabled",
+    "default_weak_delta", "default_bias_n", "scenario", "silent_thrusters", "silent",
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ShellSettings:
+    """What the process shell needs beyond the simulation itself (rates in wall-clock Hz)."""
+
+    rate_hz: float = 50.0
+    telemetry_rate_hz: float = 20.0
+    esc_status_rate_hz: float = 10.0
+    realtime_factor: float = 1.0  # sim seconds per wall second
+    fault_injection_enabled: bool = False  # SYS_FAILURE_EN at start-up
+
+
+def number(
+    table: dict[str, Any],
+    key: str,
+    where: str,
+    default: float,
+    lo: float = -math.inf,
+    positive: bool = False,
+) -> float:
+    """``table[key]`` as a finite float (default if absent); ConfigError naming the key."""
+    v = table.get(key, default)
+    ok = not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
+    if not ok or v < lo or (positive and v <= 0):
+        bound = "> 0" if positive else f">= {lo}" if lo > -math.inf else "finite"
+        raise ConfigError(f"{where}.{key}: expected a number {bound}, got {v!r}")
+    return float(v)
+
+
+def _thruster_number(value: Any, m: int, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= m:
+        raise ConfigError(f"{where}: expected a thruster number 1..{m} (1-based), got {value!r}")
+    return value - 1
+
+
+def silent_windows(sim: dict[str, Any], m: int, where: str = "sim") -> tuple[SilentWindow, ...]:
+    """``silent_thrusters = [2]`` (always silent) and ``[[sim.silent]]`` windows
+    ``{thruster = 2, from = 5.0, until = 10.0}`` (1-based thruster, sim seconds)."""
+    always = sim.get("silent_thrusters", [])
+    if not isinstance(always, list):
+        raise ConfigError(f"{where}.silent_thrusters: expected a list, got {always!r}")
+    out = [SilentWindow(_thruster_number(n, m, f"{where}.silent_thrusters")) for n in always]
+    windows = sim.get("silent", [])
+    if not isinstance(windows, list) or not all(isinstance(w, dict) for w in windows):
+        raise ConfigError(f"{where}.silent: expected a list of tables, got {windows!r}")
+    for k, w in enumerate(windows):
+        w_where = f"{where}.silent[{k}]"
+        unknown = set(w) - {"thruster", "from", "until"}
+        if unknown:
+            raise ConfigError(f"{w_where}: unknown keys {sorted(unknown)}")
+        index = _thruster_number(w.get("thruster"), m, f"{w_where}.thruster")
+        start = number(w, "from", w_where, 0.0)
+        end = w.get("until", math.inf)
+        if end != math.inf:
+            end = number(w, "until", w_where, math.inf)
+        out.append(SilentWindow(index, start, float(end)))
+    return tuple(out)
+
+
+def esc_model_from(table: dict[str, Any], where: str = "esc") -> EscModel:
+    unknown = set(table) - {"k_rpm", "k_i", "idle_a", "voltage_v"}
+    if unknown:
+        raise ConfigError(f"{where}: unknown keys {sorted(unknown)}")
+    d = DEFAULT_ESC
+    return EscModel(
+        number(table, "k_rpm", where, d.k_rpm, lo=0.0),
+        number(table, "k_i", where, d.k_i, lo=0.0),
+        number(table, "idle_a", where, d.idle_a, lo=0.0),
+        number(table, "voltage_v", where, d.voltage_v, lo=0.0),
+    )
+
+
+def initial_state(sim: dict[str, Any], where: str = "sim") -> FloatArray:
+    x0 = sim.get("x0", [0.0] * 6)
+    try:
+        arr = np.asarray(x0, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = np.array([])
+    if arr.shape != (6,) or not np.all(np.isfinite(arr)):
+        raise ConfigError(
+            f"{where}.x0: expected [north, east, psi, u, v, r] (6 numbers), got {x0!r}"
+        )
+    return arr
+
+
+def shell_settings_from(sim: dict[str, Any], where: str = "sim") -> ShellSettings:
+    enabled = sim.get("fault_injection_enabled", False)
+    if not isinstance(enabled, bool):
+        raise ConfigError(f"{where}.fault_injection_enabled: expected true/false, got {enabled!r}")
+    return ShellSettings(
+        number(sim, "rate_hz", where, 50.0, positive=True),
+        number(sim, "telemetry_rate_hz", where, 20.0, positive=True),
+        number(sim, "esc_status_rate_hz", where, 10.0, positive=True),
+        number(sim, "realtime_factor", where, 1.0, positive=True),
+        enabled,
+    )
+
+
+def sim_config_from(
+    data: dict[str, Any],
+    plant: SurfaceVessel,
+    thrusters: ThrusterSet,
+    B: FloatArray,
+    schedule: FaultSchedule | None,
+    where: str,
+) -> VesselSimConfig:
+    """The [sim] and [esc] tables of ``data`` around an already parsed plant and thrusters."""
+    s = data.get("sim", {})
+    w = f"{where}.sim"
+    if unknown := set(s) - SIM_KEYS:
+        raise ConfigError(f"{w}: unknown keys {sorted(unknown)}")
+    substeps = s.get("rk4_substeps", 8)
+    if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
+        raise ConfigError(f"{w}.rk4_substeps: expected an integer >= 1, got {substeps!r}")
+    weak = number(s, "default_weak_delta", w, 0.5, lo=0.0)
+    if weak > 1.0:
+        raise ConfigError(f"{w}.default_weak_delta: expected a number in [0, 1], got {weak}")
+    return VesselSimConfig(
+        plant=plant,
+        thrusters=thrusters,
+        B=B,
+        x0=initial_state(s, w),
+        command_timeout_s=number(s, "command_timeout_s", w, 0.5, positive=True),
+        schedule=schedule,
+        silent=silent_windows(s, thrusters.m, w),
+        esc=esc_model_from(data.get("esc", {}), f"{where}.esc"),
+        default_weak_delta=weak,
+        default_bias_n=number(s, "default_bias_n", w, 0.08),
+        rk4_substeps=substeps,
+    )

@@ -387,7 +387,8 @@ class AllocatorDaemon:
             probing=tup(r.probing if r else None, False),
             setpoint_age_s=sp_age,
             telemetry_age_s=tel_age,
-            malformed=sum(b.malformed for b in [*self.ports.setpoints, *self.ports.telemetry]),
+            malformed=sum(b.malformed for b in self.ports.setpoints)
+            + sum(b.malformed for b in self.ports.telemetry),
         )
 
     def _publish(self, *args: Any) -> None:

@@ -12,6 +12,7 @@ import logging
 import math
 import sys
 from pathlib import Path
+from typing import Any
 
 from ftcap_hil.core import Mode
 from ftcap_hil.geometry import ConfigError
@@ -42,7 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def summary_lines(res: dict) -> list[str]:  # type: ignore[type-arg]
+def summary_lines(res: dict[str, Any]) -> list[str]:
     lines = [f"{res['scenario']}: phases {[(round(a, 2), round(b, 2)) for a, b in res['phases']]}"]
     for mode, r in res["modes"].items():
         phases = " | ".join(

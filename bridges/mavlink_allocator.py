@@ -246,6 +246,26 @@ class MavlinkAllocatorLink:
         )
         return self._port.send(lambda mav: mav.ftcap_status_send(*fields))
 
+    def send_esc_status(
+        self,
+        rpm: Sequence[float],
+        current: Sequence[float],
+        age: Sequence[float],
+        failed: Sequence[bool],
+    ) -> bool:
+        """FTCAP_ESC_STATUS: per-thruster ESC telemetry (NaN = unknown, +inf age = never)."""
+        n = self.config.n_thrusters
+        mask = sum(1 << i for i, f in enumerate(failed) if f)
+        fields = (
+            self._port.time_boot_ms(),
+            padded(rpm, 16, "rpm"),
+            padded(current, 16, "current"),
+            padded(age, 16, "age"),
+            mask,
+            n,
+        )
+        return self._port.send(lambda mav: mav.ftcap_esc_status_send(*fields))
+
     def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
         return self._port.send_statustext(text, severity)
 

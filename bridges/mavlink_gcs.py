@@ -7,6 +7,8 @@ In (dispatch thread; sources filtered by ``vessel_ids`` / ``allocator_ids``):
 * ``ACTUATOR_OUTPUT_STATUS`` (allocator) -> ``thruster_commands: Mailbox[ThrusterCommand]``
   (the first ``active.bit_length()`` actuator values, N)
 * ``FTCAP_STATUS`` (allocator) -> ``allocator_status: Mailbox[AllocatorStatus]``
+* ``FTCAP_ESC_STATUS`` (allocator) -> ``esc_status: Mailbox[EscReport]`` (rpm, current, age
+  per thruster as the allocator sees its ESCs; NaN = unknown, inf age = never heard)
 * ``HEARTBEAT`` (anyone) -> :meth:`heartbeat`; ``STATUSTEXT`` (anyone, chunks reassembled)
   -> ``statustexts`` queue; ``PARAM_VALUE`` -> :meth:`params_of`; ``COMMAND_ACK`` -> the
   waiting :meth:`inject_failure`.
@@ -68,6 +70,16 @@ class StatusText:
     text: str
 
 
+@dataclass(frozen=True)
+class EscReport:
+    """FTCAP_ESC_STATUS: per-thruster rpm, current (A), age (s) and the failed flags."""
+
+    rpm: tuple[float, ...]
+    current_a: tuple[float, ...]
+    age_s: tuple[float, ...]
+    failed: tuple[bool, ...]
+
+
 class MavlinkGcsLink:
     """The ground station's MAVLink port; see the module docstring."""
 
@@ -85,6 +97,7 @@ class MavlinkGcsLink:
         self.odometry: Mailbox[Odometry] = Mailbox("mavlink.gcs.odometry")
         self.thruster_commands: Mailbox[ThrusterCommand] = Mailbox("mavlink.gcs.thrusters")
         self.allocator_status: Mailbox[AllocatorStatus] = Mailbox("mavlink.gcs.status")
+        self.esc_status: Mailbox[EscReport] = Mailbox("mavlink.gcs.esc")
         self.statustexts: queue.Queue[Stamped[StatusText]] = queue.Queue(256)
         self._cond = threading.Condition()
         self._heartbeats: dict[Ids, Stamped[Heartbeat]] = {}
@@ -96,6 +109,7 @@ class MavlinkGcsLink:
             "ODOMETRY": Route(self._on_odometry, self.odometry),
             "ACTUATOR_OUTPUT_STATUS": Route(self._on_actuators, self.thruster_commands),
             "FTCAP_STATUS": Route(self._on_status, self.allocator_status),
+            "FTCAP_ESC_STATUS": Route(self._on_esc, self.esc_status),
             "HEARTBEAT": Route(self._on_heartbeat),
             "STATUSTEXT": Route(self._on_statustext),
             "PARAM_VALUE": Route(self._on_param_value),
@@ -138,6 +152,14 @@ class MavlinkGcsLink:
             if not all(np.all(np.isfinite(a)) for a in arrays):
                 raise MalformedMessage("FTCAP_STATUS: non-finite values")
             self.allocator_status.put(status)
+
+    def _on_esc(self, msg: Any, now_ns: int) -> None:
+        if self._from(msg, self.allocator_ids):
+            n = int(msg.n_thrusters)
+            failed = tuple(bool(msg.failed >> i & 1) for i in range(n))
+            self.esc_status.put(
+                EscReport(tuple(msg.rpm[:n]), tuple(msg.current[:n]), tuple(msg.age[:n]), failed)
+            )
 
     def _on_heartbeat(self, msg: Any, now_ns: int) -> None:
         beat = Heartbeat(msg.type, msg.autopilot, msg.system_status)

@@ -34,6 +34,7 @@ from ftcap_hil.geometry import ThrusterSet
 from ftcap_hil.messages import (
     AllocatorStatus,
     BoolArray,
+    EscStatus,
     FloatArray,
     Mailbox,
     Odometry,
@@ -62,6 +63,7 @@ class Ports:
     thrusters: ThrusterSink
     status: list[StatusSink] = field(default_factory=list)
     esc_ages: Callable[[int], FloatArray] | None = None  # now_ns -> (m,) seconds
+    esc_latest: Callable[[], Sequence[EscStatus | None]] | None = None  # per thruster
 
 
 @dataclass(frozen=True)
@@ -353,6 +355,16 @@ class AllocatorDaemon:
         for sink in self.ports.status:
             sink.announce(text, severity)
 
+    def _esc_fields(self, now: int) -> dict[str, tuple[float, ...]]:
+        if self.ports.esc_latest is None or self.ports.esc_ages is None:
+            return {}
+        latest = self.ports.esc_latest()
+        return {
+            "esc_rpm": tuple(math.nan if e is None else float(e.rpm) for e in latest),
+            "esc_current_a": tuple(math.nan if e is None else float(e.current_a) for e in latest),
+            "esc_age_s": tuple(float(a) for a in self.ports.esc_ages(now)),
+        }
+
     def status(
         self,
         sp_age: float,
@@ -389,6 +401,7 @@ class AllocatorDaemon:
             telemetry_age_s=tel_age,
             malformed=sum(b.malformed for b in self.ports.setpoints)
             + sum(b.malformed for b in self.ports.telemetry),
+            **self._esc_fields(time.monotonic_ns()),
         )
 
     def _publish(self, *args: Any) -> None:

@@ -99,6 +99,8 @@ class MavlinkStatus:
             if on:
                 flags |= mav.StatusFlag[flag]
         self._link.send_thruster_commands(ThrusterCommand.checked(st.u))
+        if st.esc_age_s:
+            self._link.send_esc_status(st.esc_rpm, st.esc_current_a, st.esc_age_s, st.esc_failed)
         self._link.send_status(
             mav.AllocatorStatus(
                 np.asarray(st.tau_demand),
@@ -132,7 +134,11 @@ class ZenohStatus:
                 u=np.asarray(st.u),
                 tau_unallocated=np.asarray(st.unallocated),
                 saturated=tuple(st.saturated),
-                port_age_s={"setpoint": st.setpoint_age_s, "telemetry": st.telemetry_age_s},
+                port_age_s={
+                    "setpoint": st.setpoint_age_s,
+                    "telemetry": st.telemetry_age_s,
+                    **{f"esc{i + 1}": a for i, a in enumerate(st.esc_age_s)},
+                },
                 stale={"setpoint": st.setpoint_stale, "telemetry": st.telemetry_stale},
             )
         )

@@ -182,6 +182,9 @@ class AllocatorStatus:
     setpoint_age_s: float
     telemetry_age_s: float
     malformed: int  # malformed messages dropped, all ports
+    esc_rpm: tuple[float, ...] = ()  # last reported, NaN if never (empty: no ESC monitor)
+    esc_current_a: tuple[float, ...] = ()
+    esc_age_s: tuple[float, ...] = ()
 
     def as_dict(self) -> dict[str, object]:
         return {f: getattr(self, f) for f in self.__dataclass_fields__}

@@ -302,3 +302,46 @@ def test_bad_param_table_names_the_param() -> None:
     endpoint = MavlinkEndpoint.inbox(port, ALLOCATOR_IDS)
     with pytest.raises(LinkConfigError, match="ALLOC_GAIN"):
         MavlinkAllocatorLink(config, endpoint, [ParamSpec("ALLOC_GAIN", 5.0, max=1.0)])
+
+
+def test_esc_status_reaches_the_ground_station() -> None:
+    """FTCAP_ESC_STATUS: per-thruster ESC telemetry as the allocator saw it on CAN."""
+    import math
+    import socket
+
+    from bridges.mavlink_allocator import AllocatorLinkConfig, MavlinkAllocatorLink
+    from bridges.mavlink_config import MavlinkEndpoint
+    from bridges.mavlink_gcs import MavlinkGcsLink, wait_until
+
+    def free() -> int:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", 0))
+            return int(s.getsockname()[1])
+
+    a_port, g_port = free(), free()
+    alloc = MavlinkAllocatorLink(
+        AllocatorLinkConfig(4, (0.3, 0.3, 0.06)),
+        MavlinkEndpoint.inbox(a_port, (1, 191), (g_port,)),
+    )
+    gcs = MavlinkGcsLink(MavlinkEndpoint.inbox(g_port, (255, 190), (a_port,)))
+    try:
+
+        def sent_and_seen() -> bool:
+            alloc.send_esc_status(
+                [1200.0, -800.0, math.nan, 0.0],
+                [0.5, 0.4, math.nan, 0.05],
+                [0.01, 0.02, math.inf, 0.1],
+                [False, False, True, False],
+            )
+            return gcs.esc_status.latest() is not None
+
+        assert wait_until(sent_and_seen, timeout_s=5.0, poll_s=0.1), "no FTCAP_ESC_STATUS"
+        slot = gcs.esc_status.latest()
+        assert slot is not None
+        rep = slot.value
+        assert rep.failed == (False, False, True, False)
+        assert rep.rpm[:2] == (1200.0, -800.0) and math.isnan(rep.rpm[2])
+        assert math.isinf(rep.age_s[2]) and rep.current_a[0] == 0.5
+    finally:
+        gcs.shutdown()
+        alloc.shutdown()

@@ -20,7 +20,7 @@ def _message_ids(xml: Path) -> dict[int, str]:
 
 def test_our_ids_are_in_our_range_and_free_in_every_bundled_dialect() -> None:
     ours = _message_ids(mavlink_dialect.XML)
-    assert set(ours.values()) == {"WRENCH_SETPOINT", "FTCAP_STATUS"}
+    assert set(ours.values()) == {"WRENCH_SETPOINT", "FTCAP_STATUS", "FTCAP_ESC_STATUS"}
     assert all(i in mavlink_dialect.MESSAGE_IDS for i in ours)
     bundled = sorted(mavlink_dialect.pymavlink_definitions_dir().glob("*.xml"))
     assert any(p.name == "all.xml" for p in bundled)

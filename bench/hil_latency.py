@@ -31,6 +31,9 @@ from bridges.can_hub_bus import CanHubBus
 from ftcap_hil.messages import MalformedMessage, WrenchSetpoint
 
 
+EXTRA_SETS: list[str] = os.environ.get("FTCAP_BENCH_SET", "").split() if os.environ.get("FTCAP_BENCH_SET") else []
+
+
 def free_port(kind: int = socket.SOCK_DGRAM) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))

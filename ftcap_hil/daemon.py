@@ -147,6 +147,7 @@ class AllocatorDaemon:
         self._tau_d = np.zeros(config.B.shape[0])
         # setpoint mailbox stamp -> its command handed to the CAN sink (ns), per new setpoint
         self.reaction_ns: deque[int] = deque(maxlen=100_000)
+        self.cycle_ns: deque[int] = deque(maxlen=200_000)  # duration of each cycle
         self._last_sp_stamp = -1
 
     def _make_core(self, core_cfg: CoreConfig) -> FtcapCore:
@@ -206,6 +207,7 @@ class AllocatorDaemon:
                 for hook in self.before_cycle:
                     hook()
                 self.cycle(now)
+                self.cycle_ns.append(time.monotonic_ns() - now)
                 if now >= next_deadline:
                     next_deadline += self.period_ns
                     done = time.monotonic_ns()

@@ -368,6 +368,15 @@ def run(args: argparse.Namespace) -> int:
             len(ports.telemetry),
         )
         code = daemon.run()
+        if daemon.cycle_ns:
+            c = np.array(daemon.cycle_ns) * 1e-3
+            log.info(
+                "cycle time: median %.0f us, p99 %.0f us, p99.9 %.0f us, max %.0f us",
+                np.median(c),
+                np.percentile(c, 99),
+                np.percentile(c, 99.9),
+                c.max(),
+            )
         if daemon.reaction_ns:
             r = np.array(daemon.reaction_ns) * 1e-3
             log.info(

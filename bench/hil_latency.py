@@ -30,8 +30,7 @@ from bridges.can_codec import CanFrame, RawCommandMsg, decode_frames
 from bridges.can_hub_bus import CanHubBus
 from ftcap_hil.messages import MalformedMessage, WrenchSetpoint
 
-
-EXTRA_SETS: list[str] = os.environ.get("FTCAP_BENCH_SET", "").split() if os.environ.get("FTCAP_BENCH_SET") else []
+EXTRA_SETS: list[str] = os.environ.get("FTCAP_BENCH_SET", "").split()  # more allocator --set
 
 
 def free_port(kind: int = socket.SOCK_DGRAM) -> int:

@@ -41,7 +41,8 @@ def main() -> None:
         print("|---|---|---|---|---|")
         for mode in ("cap", "ftcap", "ftcap-literal", "oracle"):
             for p in res["modes"][mode]["phases"][1:]:
-                conv = ", ".join("-" if c is None else f"{c:.1f}" for c in p["delta_convergence_time"])
+                times = p["delta_convergence_time"]
+                conv = ", ".join("-" if c is None else f"{c:.1f}" for c in times)
                 print(
                     f"| {mode} | {p['start']:g}-{p['end']:g} | {p['deviation_rms']:.4f} / "
                     f"{p['deviation_max']:.3f} | {p['tracking_rms']:.3f} / {p['tracking_max']:.3f}"

@@ -1,0 +1,145 @@
+"""End-to-end: ``ftcap-hil demo`` starts the CAN hub, vessel, allocator and ground station as
+processes on loopback, flies example 1 of the paper through its first fault onset (12 s),
+and cleans up after itself, also when interrupted or when a child dies."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from tests.e2e.test_demo_support import child_pids, ftcap_hil, is_ours_and_alive, reap, wait_for
+
+pytestmark = pytest.mark.e2e
+
+DURATION_S = 30.0  # example 1: thruster 1 becomes delta 0.9, bias 0.01 N at 12 s
+CHILDREN = {"can_hub", "allocator", "vessel", "gcs"}
+
+
+@dataclass
+class DemoRun:
+    out: Path
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DemoRun]:
+    out = tmp_path_factory.mktemp("demo") / "out"
+    proc = subprocess.Popen(
+        ftcap_hil("demo", "--duration", str(DURATION_S), "--out", str(out)),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        stdout, stderr = proc.communicate(timeout=DURATION_S + 150)
+        yield DemoRun(out, proc.returncode, stdout.decode(), stderr.decode())
+    finally:
+        reap(proc, out)
+
+
+def _rows(run: DemoRun) -> list[dict[str, float]]:
+    with open(run.out / "ftcap" / "timeseries.csv", newline="") as fh:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+
+
+@pytest.mark.timeout(300)
+def test_demo_completes_and_writes_the_simulator_outputs(demo: DemoRun) -> None:
+    assert demo.returncode == 0, demo.stderr[-3000:]
+    results = json.loads((demo.out / "results.json").read_text())
+    assert list(results["modes"]) == ["ftcap"]  # the allocator's mode, read over MAVLink
+    assert results["phases"] == [[0.0, 12.0], [12.0, DURATION_S]]
+    pngs = {p.name for p in demo.out.glob("*.png")}
+    assert {"positions.png", "effectiveness.png", "bias.png", "xy_path.png"} <= pngs
+    assert len(_rows(demo)) > 0.9 * DURATION_S / 0.2827
+    assert "tracking rms" in demo.stdout and str(demo.out) in demo.stdout
+    assert {f"{name}.log" for name in CHILDREN} <= {p.name for p in (demo.out / "logs").iterdir()}
+
+
+@pytest.mark.timeout(300)
+def test_faults_are_injected_and_identified(demo: DemoRun) -> None:
+    results = json.loads((demo.out / "results.json").read_text())
+    injections = results["modes"]["ftcap"]["injections"]
+    assert [(i["kind"], i["thruster"], i["result"]) for i in injections] == [
+        ("WEAK", 1, "ACCEPTED"),
+        ("BIAS", 1, "ACCEPTED"),
+    ]
+    assert all(12.0 <= i["sent_at_s"] < 13.0 for i in injections)
+    rows = _rows(demo)
+    last = rows[-1]
+    assert (last["delta_1"], last["f_1"]) == (0.9, 0.01)  # the truth recorded
+    before = [r for r in rows if 10.0 <= r["t"] < 12.0]
+    assert all(abs(r["delta_hat_1"] - 1.0) < 0.05 for r in before)
+    tail = [r for r in rows if r["t"] > DURATION_S - 3.0]
+    for i in range(1, 5):
+        assert all(abs(r[f"delta_hat_{i}"] - r[f"delta_{i}"]) < 0.1 for r in tail), i
+
+
+@pytest.mark.timeout(300)
+def test_tracking_stays_bounded(demo: DemoRun) -> None:
+    results = json.loads((demo.out / "results.json").read_text())
+    mode = results["modes"]["ftcap"]
+    assert mode["bounded"]
+    after_step = mode["phases"][1]
+    assert after_step["tracking_max"] < 3.0  # a 2 m step of the reference at 12 s
+    last = _rows(demo)[-1]
+    assert abs(last["north"] - 2.0) < 0.3 and abs(last["east"]) < 0.3
+
+
+@pytest.mark.timeout(300)
+def test_no_child_is_left_running(demo: DemoRun) -> None:
+    pids = child_pids(demo.out)
+    assert set(pids) == CHILDREN
+    assert not [name for name, pid in pids.items() if is_ours_and_alive(pid)]
+
+
+def _start_demo(out: Path) -> subprocess.Popen[bytes]:
+    return subprocess.Popen(
+        ftcap_hil("demo", "--duration", "60", "--out", str(out), "--no-plots"),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+
+
+def _all_started(out: Path) -> bool:
+    return set(child_pids(out)) == CHILDREN
+
+
+@pytest.mark.timeout(120)
+def test_ctrl_c_stops_every_child(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    proc = _start_demo(out)
+    try:
+        assert wait_for(lambda: _all_started(out), 30.0)
+        assert wait_for(lambda: (out / "logs" / "gcs.log").stat().st_size > 0, 30.0)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(60) == 130
+        pids = child_pids(out)
+        assert not [name for name, pid in pids.items() if is_ours_and_alive(pid)]
+    finally:
+        reap(proc, out)
+
+
+@pytest.mark.timeout(120)
+def test_a_dying_child_stops_the_demo_with_an_error(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    proc = _start_demo(out)
+    try:
+        assert wait_for(lambda: _all_started(out), 30.0)
+        vessel = child_pids(out)["vessel"]
+        os.kill(vessel, signal.SIGKILL)
+        _, stderr = proc.communicate(timeout=60)
+        assert proc.returncode == 1
+        assert b"vessel (pid" in stderr and b"exited early" in stderr
+        pids = child_pids(out)
+        assert not [name for name, pid in pids.items() if is_ours_and_alive(pid)]
+    finally:
+        reap(proc, out)

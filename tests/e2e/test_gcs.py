@@ -1,0 +1,54 @@
+"""End-to-end: ``ftcap-hil gcs`` and ``ftcap-hil demo`` fail fast and clearly when there is
+nothing to talk to or nothing to fly."""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.e2e.test_demo_support import free_udp_ports, ftcap_hil
+
+pytestmark = [pytest.mark.e2e, pytest.mark.timeout(60)]
+
+
+def test_gcs_gives_up_when_no_vessel_answers(tmp_path: Path) -> None:
+    gcs, allocator, vessel = free_udp_ports(3)
+    started = time.monotonic()
+    proc = subprocess.run(
+        ftcap_hil(
+            "gcs", "--mission", "paper-4.2-ex1", "--out", str(tmp_path / "out"),
+            "--gcs-port", str(gcs), "--allocator-port", str(allocator),
+            "--vessel-port", str(vessel), "--set", "gcs.connect_timeout_s=1.5",
+        ),
+        capture_output=True,
+        timeout=30,
+    )  # fmt: skip
+    assert proc.returncode == 3
+    assert b"no HEARTBEAT from the vessel" in proc.stderr
+    assert time.monotonic() - started < 20.0
+    assert not (tmp_path / "out" / "results.json").exists()
+
+
+def test_gcs_refuses_a_bad_mission_value_naming_the_key(tmp_path: Path) -> None:
+    proc = subprocess.run(
+        ftcap_hil("gcs", "--mission", "paper-4.2-ex1", "--set", "mission.mode=turbo"),
+        capture_output=True,
+        timeout=30,
+    )
+    assert proc.returncode == 2
+    assert b"mission.mode" in proc.stderr and b"turbo" in proc.stderr
+
+
+def test_demo_refuses_an_unknown_mission_before_starting_anything(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        ftcap_hil("demo", "--mission", "no-such-mission", "--out", str(out)),
+        capture_output=True,
+        timeout=30,
+    )
+    assert proc.returncode == 2
+    assert b"no-such-mission" in proc.stderr
+    assert not (out / "logs" / "pids.json").exists()

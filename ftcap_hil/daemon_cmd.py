@@ -296,10 +296,13 @@ def build_ports(
         from bridges.mavlink_config import MavlinkEndpoint, default_allocator_endpoint
 
         max_wrench = tuple(mav_cfg.pop("max_wrench", (0.3, 0.3, 0.06)))
+        limit = mav_cfg.pop("wrench_limit", None)
         endpoint = MavlinkEndpoint.from_mapping("mavlink", mav_cfg, default_allocator_endpoint())
         link = stack.enter_context(
             mav.MavlinkAllocatorLink(
-                mav.AllocatorLinkConfig(cfg.daemon.thrusters.m, max_wrench),
+                mav.AllocatorLinkConfig(
+                    cfg.daemon.thrusters.m, max_wrench, None if limit is None else tuple(limit)
+                ),
                 endpoint,
                 param_specs(cfg),
             )

@@ -15,8 +15,6 @@ allocator's loop rate, estimation period, per-second rate limits and timeouts an
 station's T_s and mission clock are all wall-clock and would all have to be scaled together;
 a compressed schedule keeps every timing as on the real vessel.
 
-The allocator's WRENCH_SETPOINT limit is raised (``mavlink.max_wrench``) and the ground
-station's wrench limit with it, so that the demands of eq. (24) reach the allocator unshrunk.
 Stopping: SIGTERM to each child still running, newest first, then SIGKILL after a grace
 period; also on Ctrl-C, on SIGTERM and when any child dies early. Exit code: 0 if every child
 ended cleanly and the ground station flew the mission, 1 otherwise, 130 if interrupted.
@@ -47,8 +45,6 @@ DEFAULT_MISSION = "paper-4.2-ex1-short"
 PAPER_MISSION = "paper-4.2-ex1"
 STOP_GRACE_S = 8.0
 HUB_READY = re.compile(r"can_hub listening on 127\.0\.0\.1:(\d+)")
-MAX_WRENCH = "[10.0, 10.0, 10.0]"  # allocator: WRENCH_SETPOINT limit = 10 x this
-GCS_LIMIT = "[100.0, 100.0, 100.0]"
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
@@ -182,7 +178,6 @@ def allocator_argv(p: Ports) -> list[str]:
         f"can.channel={LOCALHOST}:{p.can}",
         f"mavlink.connection=udpin:{LOCALHOST}:{p.allocator}",
         f'mavlink.peers=["{LOCALHOST}:{p.gcs}"]',
-        f"mavlink.max_wrench={MAX_WRENCH}",
         f"zenoh.overrides={zenoh_listen}",
     ]
     return _cli("allocator", *[a for s in sets for a in ("--set", s)])
@@ -211,8 +206,6 @@ def gcs_argv(p: Ports, mission: str, out: Path, duration: float | None, plots: b
         str(p.allocator),
         "--vessel-port",
         str(p.vessel),
-        "--set",
-        f"gcs.wrench_limit={GCS_LIMIT}",
     )
     if duration is not None:
         argv += ["--duration", repr(duration)]

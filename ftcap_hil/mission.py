@@ -16,7 +16,7 @@ mission replaces the scenario's table (same syntax as scenario files, docs/scena
     [gcs]                   # all optional
     connect_timeout_s = 20.0     # heartbeats of vessel and allocator, first ODOMETRY
     odometry_timeout_s = 5.0     # no ODOMETRY for this long mid-flight -> abort
-    wrench_limit = [3.0, 3.0, 0.6]  # demands beyond this are shrunk along their direction
+    wrench_limit = [1000.0, 1000.0, 1000.0]  # demands beyond are shrunk along their direction
     clear_faults_at_end = true
 
 The fault schedule is the truth recorded in the timeseries; :func:`injection_plan` turns it
@@ -53,7 +53,7 @@ REPLACEABLE = ("controller", "reference", "fault")
 class GcsSettings:
     connect_timeout_s: float = 20.0
     odometry_timeout_s: float = 5.0
-    wrench_limit: tuple[float, float, float] = (3.0, 3.0, 0.6)  # the allocator's default
+    wrench_limit: tuple[float, float, float] = (1000.0, 1000.0, 1000.0)  # the allocator's
     clear_faults_at_end: bool = True
 
 

@@ -46,7 +46,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 class CommandLog:
-    """The allocator's own record of what it put on the bus (for capture cross-checks)."""
+    """The allocator's own record of every command it issued, for capture cross-checks.
+
+    A command the bus refused is still a row (the exit log line counts the refusals), so the
+    stamps show the loop's rhythm even while the interface is down. The CAN adapter's own
+    final zero on close comes after the daemon's logged zero and is not a row."""
 
     def __init__(self, path: Path, m: int) -> None:
         self._fh: TextIO = open(path, "w", newline="")  # noqa: SIM115 - closed in close()

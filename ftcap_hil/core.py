@@ -50,7 +50,12 @@ class CoreConfig:
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
     allocator: AllocatorConfig = field(default_factory=AllocatorConfig)
     excitation: ExcitationConfig = field(default_factory=ExcitationConfig)
-    fault_threshold: float = 0.8  # delta_hat below this: the thruster is reported faulty
+    # Fault flags, with hysteresis: flagged when delta_hat drops below fault_threshold,
+    # cleared when it rises above fault_clear. Flags only change on estimates the window
+    # determines (window_len >= m + k): right after a restart the estimate explains one or
+    # two samples by a minimum change and may dip transiently on healthy thrusters.
+    fault_threshold: float = 0.85
+    fault_clear: float = 0.95
 
 
 @dataclass(frozen=True)
@@ -66,7 +71,7 @@ class CycleResult:
     u: FloatArray  # (m,) command to send (N)
     estimate: Estimate
     allocation: Allocation
-    faulty: BoolArray  # (m,), delta_hat < fault_threshold
+    faulty: BoolArray  # (m,), see CoreConfig.fault_threshold / fault_clear
     probing: BoolArray  # (m,), a recovery probe is active
     estimation_frozen: bool
 
@@ -92,6 +97,7 @@ class FtcapCore:
             self.estimator = LiteralEstimator(self.B, self.scale, self.config.estimator)
         self._pinv = np.linalg.pinv(self.B)
         self.u_prev = np.zeros(self.m)
+        self._faulty = np.zeros(self.m, dtype=bool)
         self._estimate = Estimate(np.ones(self.m), np.zeros(self.k), np.zeros(self.m))
 
     def _estimate_for(
@@ -143,11 +149,22 @@ class FtcapCore:
             alloc.u,
             est,
             alloc,
-            est.delta_hat < self.config.fault_threshold,
+            self._fault_flags(est, forced_dead),
             probing,
             estimation_frozen=self.config.mode.estimates
             and (w is None or not bool(np.isfinite(w).all())),
         )
+
+    def _fault_flags(self, est: Estimate, forced_dead: BoolArray | None) -> BoolArray:
+        cfg = self.config
+        determined = self.config.mode is Mode.ORACLE or est.window_len >= self.m + self.k
+        if determined:
+            d = est.delta_hat
+            self._faulty = np.where(self._faulty, d < cfg.fault_clear, d < cfg.fault_threshold)
+        flags = self._faulty.copy()
+        if forced_dead is not None:
+            flags |= forced_dead
+        return flags
 
     def retune(
         self, allocator: AllocatorConfig | None = None, excitation: ExcitationConfig | None = None

@@ -75,9 +75,10 @@ def wrench_scale(B: FloatArray, u_min: FloatArray, u_max: FloatArray) -> FloatAr
 
 
 class WindowedEstimator:
-    """See the module docstring. The window is a ring buffer whose rows are zeroed on a
-    restart, so the normal equations are plain sums over the buffer (a few vectorised
-    operations per cycle, independent of where the window starts)."""
+    """See the module docstring. The normal equations are running sums: each sample's
+    contribution Phi_j^T Phi_j, Phi_j^T w_j is stored in a ring buffer, added on arrival and
+    subtracted on eviction, and the sums are rebuilt from the buffer once per window so that
+    rounding cannot accumulate. A restart zeroes the buffer."""
 
     def __init__(self, B: FloatArray, scale: FloatArray, config: EstimatorConfig | None = None):
         import daqp
@@ -87,23 +88,23 @@ class WindowedEstimator:
         self._B = np.array(B, dtype=np.float64)
         self._k, self._m = self._B.shape
         self._s = np.array(scale, dtype=np.float64)
-        Bs = self._B / self._s[:, None]  # S^-1 B
-        self._BtB = Bs.T @ Bs
-        self._BsT = Bs / self._s[:, None]  # S^-2 B, so that w @ _BsT = (B^T S^-2 w)^T
-        self._inv_s2 = 1.0 / self._s**2
+        self._Bs = self._B / self._s[:, None]  # S^-1 B
         self._pinv = np.linalg.pinv(self._B)
-        n = self.config.window
-        self._U = np.zeros((n, self._m))
-        self._W = np.zeros((n, self._k))
+        n, p = self.config.window, self._m + self._k
+        self._Phi = np.zeros((self._k, p))  # one sample's regressor, S^-1 [B diag(u), I]
+        self._Phi[:, self._m :] = np.diag(1.0 / self._s)
+        self._Hbuf = np.zeros((n, p, p))
+        self._gbuf = np.zeros((n, p))
+        self._H = np.zeros((p, p))
+        self._g = np.zeros(p)
         self._E2 = np.zeros(n)  # squared past innovations, for the adaptive threshold
         self._count = 0  # samples in the window since the last restart
         self._head = 0
         self._since_restart = 0
-        p = self._m + self._k
         self._lam = np.concatenate(
             [
                 np.full(self._m, self.config.prior_weight_delta),
-                np.full(self._k, self.config.prior_weight_bias) * self._inv_s2,
+                np.full(self._k, self.config.prior_weight_bias) / self._s**2,
             ]
         )
         self._lo = np.concatenate([np.zeros(self._m), np.full(self._k, -1e20)])
@@ -114,8 +115,10 @@ class WindowedEstimator:
         self.theta = np.concatenate([np.ones(self._m), np.zeros(self._k)])
 
     def _restart(self) -> None:
-        self._U[:] = 0.0
-        self._W[:] = 0.0
+        self._Hbuf[:] = 0.0
+        self._gbuf[:] = 0.0
+        self._H[:] = 0.0
+        self._g[:] = 0.0
         self._E2[:] = 0.0
         self._count = self._since_restart = 0
 
@@ -135,32 +138,36 @@ class WindowedEstimator:
         )
         if restarted:
             self._restart()
-        h = self._head
-        self._U[h], self._W[h], self._E2[h] = u, w, e * e
-        self._head = (h + 1) % self.config.window
-        self._count = min(self._count + 1, self.config.window)
-        self._since_restart += 1
+        self._add_sample(u, w, e)
         self.theta = self._solve()
         return self.estimate(innovation=e, restarted=restarted)
 
+    def _add_sample(self, u: FloatArray, w: FloatArray, e: float) -> None:
+        h = self._head
+        phi = self._Phi
+        phi[:, : self._m] = self._Bs * u
+        Hj = phi.T @ phi
+        gj = phi.T @ (w / self._s)
+        self._H += Hj - self._Hbuf[h]  # the slot holds the evicted sample (zero if none)
+        self._g += gj - self._gbuf[h]
+        self._Hbuf[h], self._gbuf[h], self._E2[h] = Hj, gj, e * e
+        self._head = (h + 1) % self.config.window
+        self._count = min(self._count + 1, self.config.window)
+        self._since_restart += 1
+        if self._head == 0:
+            self._H = self._Hbuf.sum(axis=0)
+            self._g = self._gbuf.sum(axis=0)
+
     def _solve(self) -> FloatArray:
-        m, U, W = self._m, self._U, self._W
-        H = np.empty((m + self._k, m + self._k))
-        H[:m, :m] = self._BtB * (U.T @ U)
-        H[:m, m:] = U.sum(axis=0)[:, None] * self._BsT.T
-        H[m:, :m] = H[:m, m:].T
-        H[m:, m:] = np.diag(self._count * self._inv_s2)
-        H.flat[:: m + self._k + 1] += self._lam
-        g = np.concatenate([(U * (W @ self._BsT)).sum(axis=0), W.sum(axis=0) * self._inv_s2])
-        g += self._lam * self.theta
+        H = self._H + np.diag(self._lam)
+        g = self._g + self._lam * self.theta
         # daqp (dual active set, C) solves this 7-variable box QP in a few microseconds,
         # cheaper than numpy's generic solve plus a fallback when a bound is active.
         x, _f, flag, _info = self._daqp(H, -g, self._no_rows, self._hi, self._lo, self._sense)
         if flag >= 1 and np.isfinite(x).all():
-            x[:m] = np.clip(x[:m], 0.0, 1.0)
-            return x
+            return np.clip(x, self._lo, self._hi, out=x)
         theta = np.linalg.lstsq(H, g, rcond=None)[0]  # not reached in practice: H is PD
-        return np.concatenate([np.clip(theta[:m], 0.0, 1.0), theta[m:]])
+        return np.clip(theta, self._lo, self._hi)
 
     def estimate(self, innovation: float = 0.0, restarted: bool = False) -> Estimate:
         delta = self.theta[: self._m].copy()

@@ -108,7 +108,7 @@ class Excitation:
         level = self._cycle // cfg.dither_period
         # The PRBS level only changes at period boundaries; a change of the dead set must
         # not leave a stale dither on a thruster that has just been taken out.
-        if level != self._cached_level or (self._cached[dead] != 0.0).any():
+        if level != self._cached_level or (dead.any() and (self._cached[dead] != 0.0).any()):
             self._cached = self._null_dither(delta_hat, ~dead)
             self._cached_level = level
         u_pref, limit = self._cached, self._zero

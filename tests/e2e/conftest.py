@@ -1,0 +1,374 @@
+"""Process fixtures of the end-to-end tests: CAN hub, simulated vessel and allocator as real
+processes on 127.0.0.1, the test playing the ground station (MAVLink, Zenoh) and a CAN tap.
+
+Topology of one rig (every port chosen free per test, loopback only, no multicast)::
+
+    test GCS inbox G  <-- STATUSTEXT, FTCAP_STATUS --  allocator inbox A  <-- ODOMETRY --  sim S
+                      --> WRENCH_SETPOINT, PARAM -->                       (also to G)
+                      --> COMMAND_LONG (faults), PARAM ------------------------------------>
+    zenoh: the allocator is the router on tcp/127.0.0.1:Z; the sim and the test are clients
+    CAN:   `python -m bridges.can_hub --port 0`; allocator (node 10), sim (ESC nodes 20..23)
+           and the test's tap are its clients
+
+Every process is started by the ``hil`` fixture and killed there by PID at teardown; the
+child logs are printed when the test failed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+import pytest
+
+from bridges.can_codec import CanFrame, DataType, RawCommandMsg, TransferAssembler
+from bridges.can_dronecan import CanEscStatusSource
+from bridges.can_hub_bus import CanHubBus
+from bridges.mavlink_config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink_gcs import MavlinkGcsLink
+from bridges.zenoh_link import ZenohGcsLink, make_config
+from ftcap_hil.controllers import PoseController
+from ftcap_hil.messages import MalformedMessage, Odometry
+from ftcap_hil.plants import wrap_angle
+
+ALLOCATOR_NODE = 10
+ESC_IDS = (20, 21, 22, 23)
+START_TIMEOUT_S = 40.0  # a cold start on a loaded 2-core machine (zenoh router, mavgen cache)
+RAW_MAX = 8191
+
+
+def free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_until(predicate: Callable[[], Any], timeout_s: float, poll_s: float = 0.02) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(poll_s)
+    return True
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
+    outcome: Any = yield
+    rep = outcome.get_result()
+    setattr(item, f"rep_{rep.when}", rep)
+
+
+class Proc:
+    """One child process with its output in a log file; signalled and killed by PID."""
+
+    def __init__(self, name: str, cmd: list[str], log_path: Path, cwd: Path) -> None:
+        self.name = name
+        self.log_path = log_path
+        self._fh = open(log_path, "w")  # noqa: SIM115 - closed in kill()
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        self.popen = subprocess.Popen(
+            cmd, stdout=self._fh, stderr=subprocess.STDOUT, cwd=cwd, env=env
+        )
+        self.pid = self.popen.pid
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def running(self) -> bool:
+        return self.popen.poll() is None
+
+    def wait_log(self, pattern: str, timeout_s: float = START_TIMEOUT_S) -> bool:
+        """True once ``pattern`` (regex) is in the log; False on timeout or early exit."""
+        rx = re.compile(pattern)
+        wait_until(lambda: rx.search(self.log()) or not self.running(), timeout_s)
+        return rx.search(self.log()) is not None
+
+    def send(self, sig: int) -> None:
+        if self.running():
+            os.kill(self.pid, sig)
+
+    def wait(self, timeout_s: float) -> int | None:
+        try:
+            return self.popen.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def kill(self) -> None:
+        """SIGKILL by PID if still running, reap, close the log. Idempotent."""
+        if self.running():
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signal.SIGKILL)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.popen.wait(10.0)
+        self._fh.close()
+
+
+@dataclass
+class RawFrame:
+    stamp_ns: int
+    source: int
+    raw: tuple[int, ...]
+
+
+class BusTap(can.Listener):
+    """The test's client of the CAN hub: every esc.RawCommand with its arrival time, and the
+    ESC telemetry (``esc`` mailboxes, rpm per thruster) through the product's own source."""
+
+    def __init__(self, channel: str, m: int = 4) -> None:
+        self.frames: list[RawFrame] = []
+        self._lock = threading.Lock()
+        self._assembler = TransferAssembler([DataType.RAW_COMMAND])
+        self.malformed = 0
+        self.bus = CanHubBus(channel=channel)
+        self.notifier = can.Notifier(self.bus, [self], 0.05)
+        self.esc = CanEscStatusSource(self.bus, m, esc_node_ids=ESC_IDS, notifier=self.notifier)
+
+    def on_message_received(self, msg: can.Message) -> None:
+        now = time.monotonic_ns()
+        frame = CanFrame(msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
+        try:
+            got = self._assembler.feed(frame, now)
+        except MalformedMessage:
+            self.malformed += 1
+            return
+        if got is not None and isinstance(got.message, RawCommandMsg):
+            with self._lock:
+                self.frames.append(RawFrame(now, got.source_node_id, got.message.raw))
+
+    def commands(self, since_ns: int = 0, source: int = ALLOCATOR_NODE) -> list[RawFrame]:
+        with self._lock:
+            return [f for f in self.frames if f.source == source and f.stamp_ns >= since_ns]
+
+    def latest(self) -> RawFrame | None:
+        got = self.commands()
+        return got[-1] if got else None
+
+    def rpm(self) -> list[float]:
+        slots = [box.latest() for box in self.esc.mailboxes]
+        return [float("nan") if s is None else s.value.rpm for s in slots]
+
+    def close(self) -> None:
+        self.esc.shutdown()
+        self.notifier.stop()
+        self.bus.shutdown()
+
+
+@dataclass
+class Rig:
+    """Ports, processes and the test's links of one HIL rig (see the module docstring)."""
+
+    tmp: Path
+    hub_channel: str = ""
+    alloc_port: int = field(default_factory=lambda: free_port(socket.SOCK_DGRAM))
+    vessel_port: int = field(default_factory=lambda: free_port(socket.SOCK_DGRAM))
+    gcs_port: int = field(default_factory=lambda: free_port(socket.SOCK_DGRAM))
+    zenoh_port: int = field(default_factory=lambda: free_port(socket.SOCK_STREAM))
+    procs: dict[str, Proc] = field(default_factory=dict)
+    closers: list[Callable[[], None]] = field(default_factory=list)
+
+    @property
+    def record(self) -> Path:
+        return self.tmp / "record.csv"
+
+    @property
+    def command_log(self) -> Path:
+        return self.tmp / "commands.csv"
+
+    def _spawn(self, name: str, args: list[str]) -> Proc:
+        key = name if name not in self.procs else f"{name}-{len(self.procs)}"  # kill every one
+        proc = Proc(key, [sys.executable, *args], self.tmp / f"{key}.log", self.tmp)
+        self.procs[key] = proc
+        return proc
+
+    def start_hub(self) -> None:
+        hub = self._spawn("hub", ["-m", "bridges.can_hub", "--port", "0"])
+        assert hub.wait_log(r"can_hub listening on \S+:\d+"), hub.log()
+        m = re.search(r"can_hub listening on (\S+:\d+)", hub.log())
+        assert m is not None
+        self.hub_channel = m.group(1)
+
+    def start_allocator(self, sets: Sequence[str] = (), verbose: bool = False) -> Proc:
+        """``ftcap-hil allocator`` on this rig's ports (+ overrides); waits until it runs."""
+        base = [
+            f'can.channel="{self.hub_channel}"',
+            f'mavlink.connection="udpin:127.0.0.1:{self.alloc_port}"',
+            f'mavlink.peers=["127.0.0.1:{self.gcs_port}"]',
+            f"zenoh.overrides=['listen/endpoints:[\"tcp/127.0.0.1:{self.zenoh_port}\"]']",
+        ]
+        args = ["-m", "ftcap_hil.cli", *(["-vv"] if verbose else []), "allocator"]
+        args += ["--command-log", str(self.command_log)]
+        for s in [*base, *sets]:
+            args += ["--set", s]
+        proc = self._spawn("allocator", args)
+        assert proc.wait_log(r"allocator: .* Hz, \d+ thrusters"), proc.log()
+        return proc
+
+    def start_sim(self, sets: Sequence[str] = (), args: Sequence[str] = ()) -> Proc:
+        """``ftcap-hil sim --record`` on this rig's ports (+ overrides); waits until it runs."""
+        base = [
+            f"can.channel={self.hub_channel}",
+            f"mavlink.connection=udpin:127.0.0.1:{self.vessel_port}",
+            f'mavlink.peers=["127.0.0.1:{self.alloc_port}", "127.0.0.1:{self.gcs_port}"]',
+            f"zenoh.connect=tcp/127.0.0.1:{self.zenoh_port}",
+        ]
+        cmd = ["-m", "ftcap_hil.cli", "sim", "--record", str(self.record), *args]
+        for s in [*base, *sets]:
+            cmd += ["--set", s]
+        proc = self._spawn("sim", cmd)
+        assert proc.wait_log("simulated vessel running"), proc.log()
+        return proc
+
+    def gcs(self) -> MavlinkGcsLink:
+        """The test's MAVLink ground station on inbox G, sending to A and S."""
+        link = MavlinkGcsLink(
+            MavlinkEndpoint.inbox(self.gcs_port, GCS_IDS, (self.alloc_port, self.vessel_port)),
+            allocator_ids=ALLOCATOR_IDS,
+            vessel_ids=VESSEL_IDS,
+        )
+        self.closers.append(link.shutdown)
+        return link
+
+    def zenoh_gcs(self) -> ZenohGcsLink:
+        """The test's Zenoh ground station, a client of the allocator's router."""
+        link = ZenohGcsLink("ftcap1", make_config("client", port=self.zenoh_port))
+        self.closers.append(link.shutdown)
+        return link
+
+    def tap(self) -> BusTap:
+        tap = BusTap(self.hub_channel)
+        self.closers.append(tap.close)
+        return tap
+
+    def record_rows(self) -> list[dict[str, str]]:
+        with open(self.record, newline="") as fh:
+            return list(csv.DictReader(fh))
+
+    def command_log_rows(self) -> list[list[float]]:
+        with open(self.command_log, newline="") as fh:
+            rows = list(csv.reader(fh))
+        return [[float(v) for v in r] for r in rows[1:]]
+
+    def logs(self, tail: int = 6000) -> str:
+        return "\n".join(
+            f"===== {n} (pid {p.pid}) =====\n{p.log()[-tail:]}" for n, p in self.procs.items()
+        )
+
+    def teardown(self) -> None:
+        """Close the test's links, then SIGKILL every child by PID (whatever the links did)."""
+        try:
+            for close in reversed(self.closers):
+                close()
+        finally:
+            self.closers.clear()
+            for proc in reversed(list(self.procs.values())):
+                proc.kill()
+
+
+@pytest.fixture
+def hil(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Rig]:
+    """A rig with the CAN hub running; the test starts the allocator and the sim it needs."""
+    rig = Rig(tmp_path)
+    try:
+        rig.start_hub()
+        yield rig
+    finally:
+        failed = any(
+            getattr(getattr(request.node, f"rep_{w}", None), "failed", False)
+            for w in ("setup", "call")
+        )
+        try:
+            rig.teardown()
+        finally:
+            if failed:
+                print(rig.logs())
+
+
+def latest_odometry(gcs: MavlinkGcsLink) -> Odometry:
+    """The ground station's latest ODOMETRY (the caller has waited for one)."""
+    slot = gcs.odometry.latest()
+    assert slot is not None, "no ODOMETRY received"
+    return slot.value
+
+
+def odometry_state(odom: Odometry) -> np.ndarray:
+    """[north, east, psi, u, v, r] from one odometry sample."""
+    return np.concatenate([odom.eta, odom.nu])
+
+
+class SetpointLoop:
+    """The test's ground-station loop in a thread: every ``period_s`` one WRENCH_SETPOINT,
+    either a constant wrench (``tau``) or eq. (24) on the latest ODOMETRY (``hold``)."""
+
+    def __init__(
+        self,
+        gcs: MavlinkGcsLink,
+        tau: list[float] | None = None,
+        hold: np.ndarray | None = None,
+        period_s: float = 0.1,
+    ) -> None:
+        self.gcs = gcs
+        self.tau = tau
+        self.hold = hold
+        self.period_s = period_s
+        self.controller = PoseController()  # the paper's gains, kp 0.75, k_eta 0.63
+        self.sent = 0
+        self.max_position_error_m = 0.0
+        self.max_heading_error_rad = 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="gcs-setpoints", daemon=True)
+
+    def __enter__(self) -> SetpointLoop:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(5.0)
+
+    def _wrench(self) -> list[float] | None:
+        if self.hold is None:
+            return self.tau
+        slot = self.gcs.odometry.latest()
+        if slot is None:
+            return None
+        x = odometry_state(slot.value)
+        err = self.hold - x[:3]
+        self.max_position_error_m = max(self.max_position_error_m, float(np.hypot(*err[:2])))
+        heading = abs(float(wrap_angle(err[2])))
+        self.max_heading_error_rad = max(self.max_heading_error_rad, heading)
+        return self.controller(x, self.hold).tolist()
+
+    def _run(self) -> None:
+        next_t = time.monotonic()
+        while not self._stop.is_set():
+            tau = self._wrench()
+            if tau is not None and self.gcs.send_wrench(tau):
+                self.sent += 1
+            next_t += self.period_s
+            self._stop.wait(max(0.0, next_t - time.monotonic()))
+
+
+def texts(gcs: MavlinkGcsLink, into: list[tuple[int, str]]) -> list[tuple[int, str]]:
+    """Append the STATUSTEXTs received since the last call to ``into`` as (receive stamp ns,
+    text); return ``into``."""
+    into.extend((item.stamp_ns, item.value.text) for item in gcs.drain_statustexts())
+    return into

@@ -19,6 +19,7 @@ import contextlib
 import logging
 import os
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -179,7 +180,9 @@ class MavlinkPort:
                 return False
             try:
                 build(self._conn.mav)
-            except OSError as e:
+            except (OSError, OverflowError, ValueError, struct.error) as e:
+                # OverflowError / struct.error: a value that does not fit the wire type
+                # (e.g. 1e39 into a float32 field): the message is not sent, the caller goes on.
                 self.stats.send_errors += 1
                 logger.debug("%s: send failed: %s", self.role, e)
                 return False

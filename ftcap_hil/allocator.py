@@ -142,9 +142,12 @@ class Allocator:
             lo, hi = command_bounds(self._u_min, self._u_max, step, u_prev)
         beff = self._B * delta_hat[None, :]
         target = tau_d - bf_hat
-        excess = np.abs(target / self._scale).max()
-        if excess > _MAX_DEMAND:  # keep the direction, drop the absurd magnitude
-            target = target * (_MAX_DEMAND / excess)
+        peak = np.abs(target).max()
+        if peak > 0.0:
+            unit = target / peak  # finite even for a 1e308 demand (target / scale would not be)
+            reach = np.abs(unit / self._scale).max()  # |target| / S = reach * peak
+            if reach > _MAX_DEMAND / peak:  # keep the direction, drop the absurd magnitude
+                target = unit * (_MAX_DEMAND / reach)
         H = beff.T @ (self._qs[:, None] * beff)
         H.flat[:: H.shape[0] + 1] += self._ru
         g = beff.T @ (self._qs * target)

@@ -138,6 +138,10 @@ class FtcapCore:
         if self.config.mode is Mode.FTCAP:
             exc = self.excitation(est.delta_hat, dead, advance=w is not None)
             u_pref, probe = exc.u_pref, exc.probe_limit
+            if forced_dead is not None and forced_dead.any():
+                # Known failed from outside (silent ESC): no probing, no dither, exactly 0.
+                u_pref = np.where(forced_dead, 0.0, u_pref)
+                probe = np.where(forced_dead, 0.0, probe)
         else:
             u_pref, probe = None, None
         alloc = self.allocator.allocate(

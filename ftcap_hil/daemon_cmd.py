@@ -392,10 +392,15 @@ def run(args: argparse.Namespace) -> int:
                 np.percentile(r, 99),
                 r.size,
             )
+        malformed = sum(b.malformed for b in ports.setpoints) + sum(
+            b.malformed for b in ports.telemetry
+        )
         log.info(
-            "allocator: stopped after %d cycles, %d overruns, %d commands refused by the bus",
+            "allocator: stopped after %d cycles, %d overruns, %d commands refused by the bus, "
+            "%d malformed inputs dropped",
             daemon.cycles,
             daemon.overruns,
             daemon.not_sent,
+            malformed,
         )
         return code

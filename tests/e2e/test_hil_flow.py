@@ -137,12 +137,6 @@ def test_a_silent_esc_is_a_failed_thruster(hil: Rig, silence: str, esc3_texts: l
     print(f"\nESC 3 statustexts {esc3_texts}; thruster 3 (raw) {ramp} then 0 x {len(held)}")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="ftcap_hil/core.py FtcapCore.step: an ESC-silent (forced_dead) thruster gets "
-    "delta_hat 0 and is then treated like an estimated-dead one, so the excitation's recovery "
-    "probe commands it +-probe_amplitude*range (raw +-819) every probe_interval samples",
-)
 def test_no_probe_commands_to_a_silent_esc(hil: Rig) -> None:
     gcs = hil.gcs()
     # probes every 10 estimator samples (2.8 s) instead of 50 so that two fall in the window

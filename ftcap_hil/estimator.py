@@ -50,6 +50,9 @@ class EstimatorConfig:
     change_floor: float = 1e-3  # innovation above this (and above change_factor*RMS) restarts
     change_factor: float = 6.0
     holdoff: int = 0  # samples after a restart before another may happen (0: m + k)
+    # Evict the sample that triggered a restart once a clean one arrives (it straddles the
+    # onset on a continuous-time plant; a discrete-time plant has no such sample).
+    evict_straddling: bool = True
 
     def __post_init__(self) -> None:
         if self.window < 2:
@@ -112,6 +115,7 @@ class WindowedEstimator:
         self._no_rows = np.zeros((0, p))
         self._sense = np.zeros(p, dtype=np.int32)
         self._holdoff = self.config.holdoff or p
+        self._provisional: int | None = None  # slot of the straddling sample after a restart
         self.theta = np.concatenate([np.ones(self._m), np.zeros(self._k)])
 
     def _restart(self) -> None:
@@ -136,11 +140,30 @@ class WindowedEstimator:
         restarted = e > max(self.config.change_floor, self.config.change_factor * rms) and (
             self._since_restart >= self._holdoff
         )
+        if self._provisional is not None:
+            self._drop(self._provisional)
+            self._provisional = None
         if restarted:
             self._restart()
         self._add_sample(u, w, e)
+        if restarted and self.config.evict_straddling:
+            # The sample that shows the jump usually straddles the onset (part healthy, part
+            # faulty). Alone it gives the immediate reaction; it is evicted as soon as a clean
+            # sample arrives: fitted together with clean samples it is inconsistent with every
+            # (delta, b), and the few-sample fit then drove healthy delta_hat to ~0 (seen in HIL
+            # by tests/e2e; offline with exact fault timing: healthy thrusters took 5.8 s to
+            # recover in ex2-bias008, 1.0 s with the eviction).
+            self._provisional = (self._head - 1) % self.config.window
         self.theta = self._solve()
         return self.estimate(innovation=e, restarted=restarted)
+
+    def _drop(self, slot: int) -> None:
+        self._H -= self._Hbuf[slot]
+        self._g -= self._gbuf[slot]
+        self._Hbuf[slot] = 0.0
+        self._gbuf[slot] = 0.0
+        self._E2[slot] = 0.0
+        self._count -= 1
 
     def _add_sample(self, u: FloatArray, w: FloatArray, e: float) -> None:
         h = self._head

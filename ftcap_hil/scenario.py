@@ -258,7 +258,10 @@ def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
     core = CoreConfig(
         mode=mode,
         estimator=dataclass_from_table(
-            EstimatorConfig, data.get("estimator", {}), f"{where}.estimator"
+            EstimatorConfig,
+            # a discrete-time plant has no sample straddling an onset (faults act per step)
+            {"evict_straddling": not isinstance(plant, LinearPlant), **data.get("estimator", {})},
+            f"{where}.estimator",
         ),
         allocator=dataclass_from_table(
             AllocatorConfig, data.get("allocator", {}), f"{where}.allocator"

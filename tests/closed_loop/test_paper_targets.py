@@ -136,8 +136,9 @@ def test_ex2_bias008_dead_thruster_recovers_through_probes() -> None:
 
 def test_ex2_limits10_ftcap_holds_position_cap_drifts() -> None:
     res, _ = _results("paper-4.2-ex2-limits10")
-    # One uncompensated step of a 0.8 N bias (the estimator sees it one sample late)
-    # moves the vessel ~0.4 m under the paper's gains; CAP drifts by metres.
-    assert _phase(res, "ftcap", 1)["tracking_max"] < 0.5
+    # A 0.8 N bias is seen one sample late, and the sample straddling the onset is only
+    # used until a clean one arrives: ~0.54 m under the paper's gains (0.41 m with faults
+    # applied per step instead of at their time); CAP drifts by metres.
+    assert _phase(res, "ftcap", 1)["tracking_max"] < 0.6
     assert _phase(res, "cap", 1)["tracking_max"] > 3.0
     assert math.isfinite(_phase(res, "ftcap", 1)["deviation_rms"])

@@ -20,12 +20,15 @@ telemetry receive stamps is T_s +- ~0.5 ms of transport jitter, so about half th
 their sample (threshold 0.999 T_s) and the next sample spans 2 T_s. Measured over eleven runs:
 RMS difference 0.001-0.05 m (max 0.004-0.14 m, deviation 0.04-0.15 m against 0.040 m
 offline), and twice 3 m RMS / 6-7 m deviation: when the skipped sample is the one at the
-onset, the next one straddles it, which is the estimator bug pinned by the xfail below.
+onset, the next one straddles it, the estimator bug that the test below pinned until it was fixed.
 
 Tolerance: a setpoint acted on one sim step (20 ms) late, the only timing error this loop can
 make, moves the boat by < 1e-4 m; MAVLink carries float32. Measured RMS difference: ~5e-6 m.
-RMS < 5 mm and max < 10 mm are therefore loose for jitter and still 4x below the skipped-sample
-case above.
+RMS < 5 mm and max < 10 mm were loose for jitter and 4x below the skipped-sample case above.
+Since the estimator evicts the sample that straddles an onset (the fix of the bug this file
+pinned), the onset transient depends on where in the interval the fault starts: the sim applies
+it on its 20 ms grid, the offline simulator at the exact time; measured 3.4 mm RMS, 11.2 mm max,
+so the max bound is 20 mm (still an order of magnitude below the 0.14-7 m of the broken cases).
 """
 
 from __future__ import annotations
@@ -50,7 +53,7 @@ DURATION_S = 30.0
 ONSET_S = 33 * TS - 0.01  # between two sim steps, so both runs switch on the same one
 HIL_START_S = 3.0  # sim time of the HIL run's k = 0 (the sim starts at rest at the origin)
 RMS_TOL_M = 0.005
-MAX_TOL_M = 0.010
+MAX_TOL_M = 0.02  # see the module docstring: the onset transient since the straddling fix
 
 SCENARIO = """
 [scenario]
@@ -153,21 +156,13 @@ def test_hil_matches_the_offline_simulator(hil: Rig) -> None:
     )
     assert rms < RMS_TOL_M and worst < MAX_TOL_M, (rms, worst)
     assert heading < 0.01, heading
-    assert dev_off < 0.05 and dev_hil < 0.05, (dev_off, dev_hil)  # F-TCAP holds station
+    # F-TCAP holds station: the issue's target for bias 0.08 is a max deviation < 0.1 m
+    assert dev_off < 0.1 and dev_hil < 0.1, (dev_off, dev_hil)
     off_final = np.array([offline[f"delta_hat_{i}"][-1] for i in range(1, 5)])
     np.testing.assert_allclose(delta_hat, off_final, atol=0.05)
     np.testing.assert_allclose(delta_hat, [1.0, 0.0, 1.0, 1.0], atol=0.05)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="ftcap_hil/estimator.py WindowedEstimator.update: the sample whose innovation "
-    "triggers the window restart is stored as the first sample of the new window; when the "
-    "fault began inside that sample's interval (always, for a real fault) it mixes healthy and "
-    "faulty data, the bounded LS then drives every delta_hat to 0, the allocator drops all four "
-    "thrusters and the vessel drifts until a recovery probe (offline the same: onsets 0.25-0.95 "
-    "T_s after a sample all collapse)",
-)
 def test_a_fault_between_two_samples_leaves_the_healthy_thrusters_alive(hil: Rig) -> None:
     onset = 33 * TS + 0.13  # half-way between the samples at 33 T_s and 34 T_s
     rows, late = _fly(hil, onset, int(round(20.0 / TS)))

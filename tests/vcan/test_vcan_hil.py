@@ -353,9 +353,10 @@ def test_a_silent_esc_is_noticed_and_its_thruster_dropped(silent: Hil) -> None:
         assert f"ESC {n} silent" not in log, silent.run.why(f"ESC {n} declared silent")
     raw = np.array([list(t.payload.cmd) for t in d.of_type(dc.RAW_COMMAND, ALLOCATOR_NODE)])
     mute = raw[2:-1, SILENT]  # between the zeros at start and end
-    assert (mute == 0).mean() >= 0.75, f"thruster {SILENT + 1} still commanded: {mute.tolist()}"
-    assert np.abs(mute).max() <= 0.15 * RAW_MAX  # at most the allocator's recovery probes
-    assert np.abs(np.delete(raw, SILENT, axis=1)).max() > 0  # the others do work
+    # A thruster known failed from outside gets exactly 0: no recovery probes, no dither
+    # (the probes it used to get also disturbed the boat, which is why the others worked;
+    # holding the origin with three live thrusters and no disturbance, all commands are 0).
+    assert (mute == 0).all(), f"thruster {SILENT + 1} still commanded: {mute.tolist()}"
     final = silent.statuses[-1]
     assert final["delta_hat"][SILENT] == 0.0 and final["flags"] & 8, final
 

@@ -42,7 +42,7 @@ from bridges.mavlink_config import (
     MavlinkEndpoint,
     default_allocator_endpoint,
 )
-from bridges.mavlink_link import MavlinkPort, PortStats, Route
+from bridges.mavlink_link import MavlinkPort, PortOwner, Route
 from bridges.mavlink_params import ParamServer, ParamService, ParamSpec
 from ftcap_hil.messages import (
     FloatArray,
@@ -157,7 +157,7 @@ def wrench_from_setpoint(msg: Any, limit: Sequence[float]) -> WrenchSetpoint:
     return setpoint
 
 
-class MavlinkAllocatorLink:
+class MavlinkAllocatorLink(PortOwner):
     """The allocator daemon's MAVLink port; see the module docstring.
 
     Mailboxes: ``odometry``, ``setpoint``, ``manual``. Parameters: ``params`` (a
@@ -271,22 +271,3 @@ class MavlinkAllocatorLink:
 
     def set_system_status(self, status: SystemStatus) -> None:
         self._port.set_system_status(status)
-
-    # --- lifecycle ---
-
-    @property
-    def stats(self) -> PortStats:
-        return self._port.stats
-
-    @property
-    def is_alive(self) -> bool:
-        return self._port.is_alive
-
-    def shutdown(self) -> None:
-        self._port.shutdown()
-
-    def __enter__(self) -> MavlinkAllocatorLink:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.shutdown()

@@ -34,7 +34,7 @@ import numpy as np
 from bridges.mavlink_allocator import AllocatorStatus
 from bridges.mavlink_codec import Severity, odometry_from_message
 from bridges.mavlink_config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint, default_gcs_endpoint
-from bridges.mavlink_link import MavlinkPort, PortStats, Route
+from bridges.mavlink_link import MavlinkPort, PortOwner, Route
 from bridges.mavlink_vessel import (
     FAILURE_TYPE_OF,
     FAILURE_UNIT_SYSTEM_MOTOR,
@@ -80,7 +80,7 @@ class EscReport:
     failed: tuple[bool, ...]
 
 
-class MavlinkGcsLink:
+class MavlinkGcsLink(PortOwner):
     """The ground station's MAVLink port; see the module docstring."""
 
     def __init__(
@@ -307,25 +307,6 @@ class MavlinkGcsLink:
                 out.append(self.statustexts.get_nowait())
             except queue.Empty:
                 return out
-
-    # --- lifecycle ---
-
-    @property
-    def stats(self) -> PortStats:
-        return self._port.stats
-
-    @property
-    def is_alive(self) -> bool:
-        return self._port.is_alive
-
-    def shutdown(self) -> None:
-        self._port.shutdown()
-
-    def __enter__(self) -> MavlinkGcsLink:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.shutdown()
 
 
 def wait_until(predicate: Any, timeout_s: float, poll_s: float = 0.01) -> bool:

@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Self
 
 os.environ.setdefault("MAVLINK20", "1")  # read by mavutil when it builds its default dialect
 
@@ -309,6 +309,30 @@ class MavlinkPort:
                     self._conn.close()
 
     def __enter__(self) -> MavlinkPort:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.shutdown()
+
+
+class PortOwner:
+    """Lifecycle shared by the links that own one :class:`MavlinkPort` as ``self._port``:
+    statistics, liveness, idempotent shutdown and the context manager."""
+
+    _port: MavlinkPort
+
+    @property
+    def stats(self) -> PortStats:
+        return self._port.stats
+
+    @property
+    def is_alive(self) -> bool:
+        return self._port.is_alive
+
+    def shutdown(self) -> None:
+        self._port.shutdown()
+
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

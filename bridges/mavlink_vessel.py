@@ -46,7 +46,7 @@ from typing import Any
 
 from bridges.mavlink_codec import Severity, SystemStatus, quaternion_from_yaw
 from bridges.mavlink_config import MavlinkEndpoint, default_vessel_endpoint
-from bridges.mavlink_link import MavlinkPort, PortStats, Route
+from bridges.mavlink_link import MavlinkPort, PortOwner, Route
 from bridges.mavlink_params import ParamServer, ParamService, ParamSpec, ParamType
 from ftcap_hil.messages import FaultInjection, FaultKind, Odometry, Stamped
 
@@ -123,7 +123,7 @@ def decode_inject_failure(
     return InjectDecision(MavResult.ACCEPTED, faults)
 
 
-class MavlinkVesselLink:
+class MavlinkVesselLink(PortOwner):
     """The simulated vessel's MAVLink port; see the module docstring.
 
     ``faults``: queue of ``Stamped[FaultInjection]``, drained by the sim loop
@@ -233,22 +233,3 @@ class MavlinkVesselLink:
 
     def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
         return self._port.send_statustext(text, severity)
-
-    # --- lifecycle ---
-
-    @property
-    def stats(self) -> PortStats:
-        return self._port.stats
-
-    @property
-    def is_alive(self) -> bool:
-        return self._port.is_alive
-
-    def shutdown(self) -> None:
-        self._port.shutdown()
-
-    def __enter__(self) -> MavlinkVesselLink:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.shutdown()

@@ -5,7 +5,7 @@ through fresh cores, so every variant sees the same inputs, and times ``FtcapCor
 Baseline in the same process: the same allocation QP solved by a per-call
 ``qpsolvers.solve_qp`` (what a naive implementation does each cycle).
 
-    python bench/cycle.py [SCENARIO] [--repeat N]
+    python bench/cycle.py [SCENARIO] [--json FILE]
 
 Prints median / p99 per variant and the ratios to the baseline.
 """

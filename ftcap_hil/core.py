@@ -15,6 +15,7 @@ e.g. after the shell had to send zero).
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -103,13 +104,14 @@ class FtcapCore:
     def _estimate_for(
         self, w: FloatArray | None, applied: FloatArray, truth: Truth | None
     ) -> Estimate:
+        """w: a finite sample, or None (no sample, or a non-finite one)."""
         mode = self.config.mode
         if mode is Mode.ORACLE:
             if truth is None:
                 raise ValueError("oracle mode needs the true faults")
             bf = self.B @ truth.f
             return Estimate(truth.delta.copy(), bf, truth.f.copy())
-        if self.estimator is None or w is None or not np.all(np.isfinite(w)):
+        if self.estimator is None or w is None:
             return self._estimate  # CAP/NONE keep the identity; stale telemetry freezes
         return self.estimator.update(applied, w)
 
@@ -131,6 +133,8 @@ class FtcapCore:
         cycle for the rate limits; defaults to the configured period.
         """
         u_sample = self.u_prev if u_sample is None else u_sample
+        if w is not None and not math.isfinite(w.sum()):
+            w = None  # no sample: non-finite (or so large that its sum overflows)
         self._estimate = est = self._estimate_for(w, u_sample, truth)
         if forced_dead is not None and forced_dead.any():
             est = replace(est, delta_hat=np.where(forced_dead, 0.0, est.delta_hat))
@@ -155,8 +159,7 @@ class FtcapCore:
             alloc,
             self._fault_flags(est, forced_dead),
             probing,
-            estimation_frozen=self.config.mode.estimates
-            and (w is None or not bool(np.isfinite(w).all())),
+            estimation_frozen=self.config.mode.estimates and w is None,
         )
 
     def _fault_flags(self, est: Estimate, forced_dead: BoolArray | None) -> BoolArray:

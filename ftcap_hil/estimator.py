@@ -110,6 +110,7 @@ class WindowedEstimator:
                 np.full(self._k, self.config.prior_weight_bias) / self._s**2,
             ]
         )
+        self._lam_diag = np.diag(self._lam)
         self._lo = np.concatenate([np.zeros(self._m), np.full(self._k, -1e20)])
         self._hi = np.concatenate([np.ones(self._m), np.full(self._k, 1e20)])
         self._no_rows = np.zeros((0, p))
@@ -182,13 +183,13 @@ class WindowedEstimator:
             self._g = self._gbuf.sum(axis=0)
 
     def _solve(self) -> FloatArray:
-        H = self._H + np.diag(self._lam)
+        H = self._H + self._lam_diag
         g = self._g + self._lam * self.theta
         # daqp (dual active set, C) solves this 7-variable box QP in a few microseconds,
         # cheaper than numpy's generic solve plus a fallback when a bound is active.
         x, _f, flag, _info = self._daqp(H, -g, self._no_rows, self._hi, self._lo, self._sense)
-        if flag >= 1 and np.isfinite(x).all():
-            return np.clip(x, self._lo, self._hi, out=x)
+        if flag >= 1 and math.isfinite(x.sum()):
+            return np.minimum(np.maximum(x, self._lo, out=x), self._hi, out=x)
         theta = np.linalg.lstsq(H, g, rcond=None)[0]  # not reached in practice: H is PD
         return np.clip(theta, self._lo, self._hi)
 

@@ -56,39 +56,39 @@ class Excitation:
         # once: per-cycle random draws cost more than the rest of the excitation.
         rng = np.random.default_rng(self.config.seed)
         self._table = rng.integers(0, 2, size=(1024, m)) * 2.0 - 1.0
-        self._levels = np.zeros(m)
         self._zero = np.zeros(m)
         self._cached = np.zeros(m)
         self._cached_level = -1
         self._cycle = 0
-        self._basis_key: tuple[FloatArray, IntArray] | None = None
+        self._live_key = b""  # live mask (bytes) the basis was computed for
+        self._delta_key = np.ones(m)  # delta_hat the basis was computed for
+        self._idx: IntArray = np.zeros(0, dtype=np.intp)
         self._basis = np.zeros((0, 0))
 
-    def _null_basis(self, delta_hat: FloatArray, idx: IntArray) -> FloatArray:
-        """Null space of the scaled live effective matrix; recomputed only when delta_hat
-        moved by more than 1e-3 or the live set changed (an SVD per cycle is the
-        dearest part of the excitation otherwise)."""
-        key = self._basis_key
-        if (
-            key is None
-            or not np.array_equal(key[1], idx)
-            or np.abs(key[0] - delta_hat).max() > 1e-3
-        ):
+    def _null_basis(self, delta_hat: FloatArray, live: BoolArray) -> tuple[IntArray, FloatArray]:
+        """Live thruster indices and the null space of the scaled live effective matrix;
+        recomputed only when delta_hat moved by more than 1e-3 or the live set changed (an
+        SVD per cycle is the dearest part of the excitation otherwise)."""
+        mask = live.tobytes()
+        if mask != self._live_key or np.abs(self._delta_key - delta_hat).max() > 1e-3:
+            idx = np.flatnonzero(live)
             beff = self._B[:, idx] * (delta_hat[idx] * self._range[idx])[None, :]
-            _, sv, vt = np.linalg.svd(beff)
-            rank = int(np.sum(sv > 1e-9 * max(sv.max(initial=0.0), 1.0)))
-            self._basis = vt[rank:].T  # (live, nullity)
-            self._basis_key = (delta_hat.copy(), idx.copy())
-        return self._basis
+            if idx.size:
+                _, sv, vt = np.linalg.svd(beff)
+                rank = int(np.sum(sv > 1e-9 * max(sv.max(initial=0.0), 1.0)))
+                self._basis = vt[rank:].T  # (live, nullity)
+            else:
+                self._basis = np.zeros((0, 0))
+            self._idx = idx
+            self._live_key, self._delta_key = mask, delta_hat.copy()
+        return self._idx, self._basis
 
     def _null_dither(self, delta_hat: FloatArray, live: BoolArray) -> FloatArray:
-        m = self._B.shape[1]
-        out = np.zeros(m)
-        idx = np.flatnonzero(live)
-        if self.config.dither_amplitude == 0 or idx.size == 0:
+        out = np.zeros(self._B.shape[1])
+        if self.config.dither_amplitude == 0:
             return out
         # Columns are scaled to the thruster ranges so the dither uses each range evenly.
-        basis = self._null_basis(delta_hat, idx)
+        idx, basis = self._null_basis(delta_hat, live)
         if basis.shape[1] == 0:
             return out
         level = self._cycle // self.config.dither_period

@@ -43,9 +43,16 @@ class BoxQpSolver(Protocol):
     ) -> BoxQpSolution: ...
 
 
-def _checked(x: FloatArray, lo: FloatArray, hi: FloatArray, tol: float) -> bool:
-    """Finite and inside [lo - tol, hi + tol] (a NaN fails the comparison)."""
-    return bool(np.abs(x - np.clip(x, lo, hi)).max(initial=0.0) <= tol)
+def _accepted(
+    x: FloatArray, lo: FloatArray, hi: FloatArray, tol: float, iterations: int = 0
+) -> BoxQpSolution:
+    """x clipped to [lo, hi] if it is finite and inside [lo - tol, hi + tol], else not found
+    (a NaN propagates through maximum/minimum and fails the comparison). minimum(maximum())
+    rather than np.clip: the same result at a third of the cost on 4-vectors."""
+    clipped = np.minimum(np.maximum(x, lo), hi)
+    if np.abs(x - clipped).max(initial=0.0) <= tol:
+        return BoxQpSolution(clipped, True, iterations)
+    return BoxQpSolution(x, False, iterations)
 
 
 class ProxqpBoxSolver:
@@ -60,6 +67,7 @@ class ProxqpBoxSolver:
         self._max_iter = max_iter
         self._qp: Any = None  # proxsuite.proxqp.dense.QP, untyped
         self._H = np.zeros((n, n))  # the H the workspace holds
+        self._H_tol = 0.0  # a new H closer than this (max abs difference) is not passed
         self._solved = proxqp.QPSolverOutput.PROXQP_SOLVED
 
     def _fresh(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> None:
@@ -79,14 +87,17 @@ class ProxqpBoxSolver:
         qp.solve()
         self._qp = qp
         self._H = H
+        self._H_tol = 1e-9 * np.abs(H).max()
 
     def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
         if self._qp is not None:
             # proxsuite re-does its set-up whenever H is passed (~50 us here); the estimates
-            # behind H move by ~1e-9 per cycle in steady state, so only pass a changed H.
+            # behind H move by ~1e-9 per cycle in steady state, so only pass a changed H
+            # (the allocator hands back the very same array while delta_hat holds still).
             Hn = None
-            if np.abs(H - self._H).max() > 1e-9 * np.abs(self._H).max():
+            if H is not self._H and np.abs(H - self._H).max() > self._H_tol:
                 Hn = self._H = H
+                self._H_tol = 1e-9 * np.abs(H).max()
             self._qp.update(Hn, g, None, None, None, None, None, lo, hi)
             self._qp.solve()
             sol = self._result(lo, hi)
@@ -102,9 +113,11 @@ class ProxqpBoxSolver:
 
     def _result(self, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
         res = self._qp.results
+        info = res.info
         x = res.x.copy()
-        found = res.info.status == self._solved and _checked(x, lo, hi, 1e-7)
-        return BoxQpSolution(np.clip(x, lo, hi) if found else x, found, res.info.iter)
+        if info.status != self._solved:
+            return BoxQpSolution(x, False, info.iter)
+        return _accepted(x, lo, hi, 1e-7, info.iter)
 
 
 class DaqpBoxSolver:
@@ -123,9 +136,10 @@ class DaqpBoxSolver:
             H, g, self._A, np.minimum(hi, _BIG), np.maximum(lo, -_BIG), self._sense
         )
         x = np.asarray(x, dtype=np.float64)
-        found = exitflag >= 1 and _checked(x, lo, hi, 1e-7)
         iterations = int(info.get("iterations", 0)) if isinstance(info, dict) else 0
-        return BoxQpSolution(np.clip(x, lo, hi) if found else x, found, iterations)
+        if exitflag < 1:
+            return BoxQpSolution(x, False, iterations)
+        return _accepted(x, lo, hi, 1e-7, iterations)
 
 
 class QpsolversBoxSolver:
@@ -142,9 +156,8 @@ class QpsolversBoxSolver:
         x = self._solve_qp(H, g, lb=lo, ub=hi, solver=self._solver)
         if x is None:
             return BoxQpSolution(np.full_like(g, np.nan), False)
-        x = np.asarray(x, dtype=np.float64)
-        found = _checked(x, lo, hi, 1e-5)  # one-shot defaults are looser than our workspaces
-        return BoxQpSolution(np.clip(x, lo, hi) if found else x, found)
+        # One-shot defaults are looser than our workspaces.
+        return _accepted(np.asarray(x, dtype=np.float64), lo, hi, 1e-5)
 
 
 _BACKENDS: dict[str, Callable[[int], BoxQpSolver]] = {

@@ -226,6 +226,35 @@ def test_warm_start_matches_cold_solve_under_constant_demand(backend: str) -> No
     np.testing.assert_allclose(B @ u, tau_d, atol=1e-5)
 
 
+@pytest.mark.parametrize("backend", ["proxqp", "daqp"])
+def test_reused_H_follows_delta_hat(backend: str) -> None:
+    """The allocator reuses its H while delta_hat moves by <= 1e-9 and rebuilds it beyond
+    that, or after a retune: every command must match a fresh allocator's (no stale H)."""
+    ths, B, scale = vessel("paper4")
+    warm = fresh_allocator("paper4", backend)
+    tau_d = np.array([0.08, -0.03, 0.01])
+    u = np.zeros(4)
+    # Tiny drifts (reused), then a weak thruster (rebuilt), a dead one, and a recovery.
+    steps = [np.ones(4) - 3e-10 * i for i in range(4)]
+    steps += [np.array([1.0, 0.5, 1.0, 1.0]), np.array([1.0, 0.5, 0.0, 1.0]), np.ones(4)]
+    Hs = []
+    for delta_hat in steps:
+        cold = fresh_allocator("paper4", "daqp")
+        expected = cold.allocate(tau_d, delta_hat, np.zeros(3), u).u
+        u = warm.allocate(tau_d, delta_hat, np.zeros(3), u).u
+        np.testing.assert_allclose(u, expected, atol=1e-6)
+        Hs.append(warm._H)
+    assert all(H is Hs[0] for H in Hs[:4])  # drift below 1e-9: the same array, no set-up
+    assert len({id(H) for H in Hs[3:]}) == 4  # every real change rebuilt it
+    cfg = AllocatorConfig(backend=backend, effort_weight=1e3)  # a retune must rebuild it too
+    warm.retune(cfg)
+    cold = Allocator(B, ths, DT_S, scale, cfg)
+    expected = cold.allocate(tau_d, np.ones(4), np.zeros(3), u).u
+    np.testing.assert_allclose(
+        warm.allocate(tau_d, np.ones(4), np.zeros(3), u).u, expected, atol=1e-6
+    )
+
+
 class FailingSolver:
     """Test double of the BoxQpSolver protocol: every solve fails (returns NaN, found=False)."""
 

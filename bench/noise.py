@@ -25,7 +25,7 @@ from sim.offline import run_mode
 VARIANTS: dict[str, tuple[Mode, dict[str, object]]] = {
     "cap": (Mode.CAP, {}),
     "ftcap": (Mode.FTCAP, {}),
-    "ftcap N=60": (Mode.FTCAP, {"window": 60}),
+    "ftcap prefilter 0.3": (Mode.FTCAP, {"prefilter": 0.3}),
     "oracle": (Mode.ORACLE, {}),
 }
 

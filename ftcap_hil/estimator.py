@@ -53,10 +53,17 @@ class EstimatorConfig:
     # Evict the sample that triggered a restart once a clean one arrives (it straddles the
     # onset on a continuous-time plant; a discrete-time plant has no such sample).
     evict_straddling: bool = True
+    # Pole a of the first-order low-pass (1 - a) / (1 - a q^-1) applied alike to the command
+    # and the measured wrench before the fit (0: off). Less velocity noise, but it also
+    # attenuates the dither and probes against model error: measured trade-off in
+    # docs/algorithm.md, hence off by default.
+    prefilter: float = 0.0
 
     def __post_init__(self) -> None:
         if self.window < 2:
             raise ValueError(f"estimator.window: need >= 2, got {self.window}")
+        if not 0.0 <= self.prefilter < 1.0:
+            raise ValueError(f"estimator.prefilter: need [0, 1), got {self.prefilter}")
         for key in ("prior_weight_delta", "prior_weight_bias", "change_floor", "change_factor"):
             if not getattr(self, key) > 0:
                 raise ValueError(f"estimator.{key}: must be > 0, got {getattr(self, key)}")
@@ -118,6 +125,8 @@ class WindowedEstimator:
         self._holdoff = self.config.holdoff or p
         self._provisional: int | None = None  # slot of the straddling sample after a restart
         self.theta = np.concatenate([np.ones(self._m), np.zeros(self._k)])
+        self._uf: FloatArray | None = None  # prefilter states
+        self._wf: FloatArray | None = None
 
     def _restart(self) -> None:
         self._Hbuf[:] = 0.0
@@ -141,11 +150,24 @@ class WindowedEstimator:
         restarted = e > max(self.config.change_floor, self.config.change_factor * rms) and (
             self._since_restart >= self._holdoff
         )
+        evicted = self._provisional is not None
         if self._provisional is not None:
             self._drop(self._provisional)
             self._provisional = None
         if restarted:
             self._restart()
+        a = self.config.prefilter
+        if a > 0.0:
+            # The innovation test above uses the raw sample (a jump is not smeared); the fit
+            # uses the filtered one, whose state starts afresh at a restart, and again at the
+            # first clean sample after it, so that the new window holds neither pre-onset data
+            # nor, once evicted, the straddling sample.
+            if restarted or evicted or self._uf is None or self._wf is None:
+                self._uf, self._wf = np.array(u, dtype=np.float64), np.array(w, dtype=np.float64)
+            else:
+                self._uf = a * self._uf + (1.0 - a) * u
+                self._wf = a * self._wf + (1.0 - a) * w
+            u, w = self._uf, self._wf
         self._add_sample(u, w, e)
         if restarted and self.config.evict_straddling:
             # The sample that shows the jump usually straddles the onset (part healthy, part

@@ -140,12 +140,48 @@ def test_delta_estimate_is_bounded() -> None:
     assert e.delta_hat[1] == pytest.approx(0.0, abs=1e-6)
 
 
+def test_prefilter_changes_nothing_on_noise_free_data() -> None:
+    """Filtering command and wrench alike keeps a noise-free sample exact, and the filter
+    restarts with the window (and again after the straddling sample is evicted), so the
+    estimates match the unfiltered ones through a fault onset."""
+    ths, B, scale = setup("paper4")
+    rng = np.random.default_rng(4)
+    plain = WindowedEstimator(B, scale)
+    filtered = WindowedEstimator(B, scale, EstimatorConfig(prefilter=0.5))
+    f = np.array([0.0, 0.005, 0.0, 0.0])
+    for t in range(120):
+        delta = np.ones(4) if t < 40 else np.array([1.0, 0.6, 1.0, 0.0])
+        u = exciting(rng, ths)
+        w = B @ (delta * u + f)
+        a, b = plain.update(u, w), filtered.update(u, w)
+        assert a.restarted == b.restarted
+        assert a.window_len == b.window_len
+        if a.window_len >= 4:  # fewer samples than unknowns: the minimum change decides
+            np.testing.assert_allclose(b.delta_hat, a.delta_hat, atol=1e-6)
+            np.testing.assert_allclose(b.bf_hat, a.bf_hat, atol=1e-6 * scale.max())
+    np.testing.assert_allclose(b.delta_hat, delta, atol=1e-3)
+
+
+def test_prefilter_averages_the_fitted_samples() -> None:
+    """The fit sees (1 - a) / (1 - a q^-1) of the command: with a = 0.5 and u = 1, 0, 0 the
+    fitted commands are 1, 0.5, 0.25 (visible in the window's normal equations)."""
+    ths, B, scale = setup("paper4")
+    est = WindowedEstimator(B, scale, EstimatorConfig(prefilter=0.5, change_floor=1e9))
+    for u1 in (0.1, 0.0, 0.0):
+        est.update(np.array([u1, 0.0, 0.0, 0.0]), B @ np.array([u1, 0.0, 0.0, 0.0]))
+    # H[0, 0] = sum_j (S^-1 B_1 u_1j)^2 over the three fitted samples
+    b1 = np.sum((B[:, 0] / scale) ** 2)
+    assert est._H[0, 0] == pytest.approx(b1 * (0.1**2 + 0.05**2 + 0.025**2), rel=1e-9)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "key"),
     [
         ({"window": 1}, "window"),
         ({"change_floor": 0.0}, "change_floor"),
         ({"prior_weight_delta": -1.0}, "prior_weight_delta"),
+        ({"prefilter": 1.0}, "prefilter"),
+        ({"prefilter": -0.1}, "prefilter"),
     ],
 )
 def test_config_errors_name_key(kwargs: dict[str, float], key: str) -> None:

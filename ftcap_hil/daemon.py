@@ -11,7 +11,10 @@ keep their phase). Each cycle:
 
 Watchdogs: no setpoint for ``setpoint_timeout_s`` -> zero thrust; telemetry older than
 ``telemetry_timeout_s`` -> estimation frozen, allocation continues; an ESC silent for
-``esc_timeout_s`` -> that thruster allocated as failed. On exit, always a zero command.
+``esc_timeout_s`` -> that thruster allocated as failed. An ESC not heard yet is held at zero
+too, but announced as waiting (info), not as failed, until another ESC has been reporting for
+``esc_timeout_s``: at start-up the vessel may simply not be powered yet. On exit, always a
+zero command.
 """
 
 from __future__ import annotations
@@ -138,6 +141,7 @@ class AllocatorDaemon:
         self._last_cycle_ns: int | None = None
         self._last_status_ns = 0
         self._flags: dict[str, Any] = {}
+        self._esc_bus_alive_ns: int | None = None  # when the first ESC was heard
         self._pending: list[Callable[[], None]] = []
         self.before_cycle: list[Callable[[], None]] = []  # hooks run in the loop thread
         self._pending_lock = threading.Lock()
@@ -299,13 +303,29 @@ class AllocatorDaemon:
     def _esc_failed(self, now: int) -> BoolArray | None:
         if self.ports.esc_ages is None:
             return None
-        failed = self.ports.esc_ages(now) > self.config.esc_timeout_s
+        ages = self.ports.esc_ages(now)
+        timeout = self.config.esc_timeout_s
+        failed = ages > timeout  # never heard: age +inf, failed as well
+        heard = np.isfinite(ages)
+        if self._esc_bus_alive_ns is None and heard.any():
+            self._esc_bus_alive_ns = now
+        others_up = (
+            self._esc_bus_alive_ns is not None and now - self._esc_bus_alive_ns > timeout * 1e9
+        )
         for i, f in enumerate(failed):
+            n = i + 1
             self._transition(
-                f"esc{i + 1}",
-                bool(f),
-                f"ESC {i + 1} silent: thruster failed",
-                f"ESC {i + 1} reporting again",
+                f"esc-wait{n}",
+                not heard[i],
+                f"ESC {n} not heard yet: thruster held at 0",
+                f"ESC {n} reporting",
+                on_severity="info",
+            )
+            self._transition(
+                f"esc{n}",
+                bool(f) and (heard[i] or others_up),
+                f"ESC {n} silent: thruster failed",
+                f"ESC {n} reporting again",
             )
         return failed
 
@@ -336,11 +356,13 @@ class AllocatorDaemon:
         x1 = np.concatenate([odom.eta, odom.nu])
         return self.config.plant.measured_wrench(x0, x1, dt), u_mean
 
-    def _transition(self, key: str, value: bool, on: str, off: str) -> None:
+    def _transition(
+        self, key: str, value: bool, on: str, off: str, on_severity: str = "warning"
+    ) -> None:
         old = self._flags.get(key, False)
         if value != old:
             self._flags[key] = value
-            self._announce(on if value else off, "warning" if value else "info")
+            self._announce(on if value else off, on_severity if value else "info")
 
     def _report_transitions(self, r: CycleResult, esc_failed: BoolArray | None) -> None:
         for i, faulty in enumerate(r.faulty):

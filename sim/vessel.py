@@ -3,13 +3,21 @@
 Pure: no I/O, no clock. The process shell (``sim.vessel_cmd``) feeds it commands with their
 receive stamps, fault injections, and steps it on its own deadlines.
 
-Per step of length ``dt_s`` (sim time), with the faults and command held over the step::
+Per step of length ``dt_s`` (sim time), with the faults held over the step::
 
     u     = clip(command, u_min, u_max)        if the command is fresh, else 0   (m,) N
     F     = delta * u + f                      produced force per thruster       (m,) N
     tau   = B F                                body-frame [X, Y, N]              (3,)
     x    <- SurfaceVessel.step_rk4(x, tau, dt_s)        x = [north, east, psi, u, v, r]
                                                psi then wrapped to (-pi, pi]
+
+A command takes effect when it was received, as on a real thruster: if its stamp falls
+inside the step (between the previous ``step`` call's ``now_s`` and this one's), the step is
+split there and the command acting before keeps the first part. (Applying it from the start
+of the step made it act up to one sim period early, 10 ms on average at 50 Hz; the allocator,
+which averages its commands over each telemetry interval, then saw a residual of ~2 % of full
+scale at every large command change, enough to mislead a window of few samples.) Only the
+latest command of a step is known to the step.
 
 Watchdog: a command older than ``command_timeout_s`` (on the caller's clock, the one the
 stamps come from: wall time even when the sim runs faster than real time) is dropped and the
@@ -75,11 +83,11 @@ class SimSample:
 
     t_s: float
     x: FloatArray  # (6,) [north, east, psi, u, v, r]
-    u: FloatArray  # command applied (after the watchdog and amplitude clip), N
+    u: FloatArray  # command applied at the end of the step (after watchdog and clip), N
     command_fresh: bool
     command_age_s: float  # inf: no command ever
-    produced: FloatArray  # F = delta u + f, N
-    tau: FloatArray  # (3,) B F
+    produced: FloatArray  # F = delta u + f, N, mean over the step (a command may arrive in it)
+    tau: FloatArray  # (3,) B F, mean over the step
     delta: FloatArray
     f: FloatArray
     silent: BoolArray
@@ -105,6 +113,8 @@ class VesselSim:
         self._silent_override: list[bool | None] = [None] * m
         self._produced = np.zeros(m)
         self._responding = np.ones(m, dtype=bool)
+        self._acting = np.zeros(m)  # the command at the end of the last step
+        self._last_now_s: float | None = None
 
     @property
     def t_s(self) -> float:
@@ -190,16 +200,31 @@ class VesselSim:
         u = self._command.copy() if fresh else np.zeros(self.m)
         truth = self.faults()
         silent = self.silent()
+        # Fraction of the step that ran before the latest command arrived (module docstring).
+        before = 0.0
+        last = self._last_now_s
+        if fresh and last is not None and last < self._command_stamp_s < now_s:
+            before = (self._command_stamp_s - last) / (now_s - last)
+        plant, substeps, B = self.config.plant, self.config.rk4_substeps, self.config.B
+        prev = self._acting
+        if before > 0.0:
+            early = B @ (truth.delta * prev + truth.f)
+            self._x = plant.step_rk4(self._x, early, before * dt_s, substeps)
         produced = truth.delta * u + truth.f
-        tau = self.config.B @ produced
-        self._x = self.config.plant.step_rk4(self._x, tau, dt_s, self.config.rk4_substeps)
+        tau = B @ produced
+        self._x = plant.step_rk4(self._x, tau, (1.0 - before) * dt_s, substeps)
         self._x[2] = float(wrap_angle(self._x[2]))  # psi in (-pi, pi], as telemetry reports it
         self._t_s += dt_s
         self._produced = produced
         self._responding = truth.delta > 0.0
+        self._acting = u
+        self._last_now_s = now_s
+        u_mean = before * prev + (1.0 - before) * u if before > 0.0 else u
+        produced_mean = truth.delta * u_mean + truth.f
         return SimSample(
-            self._t_s, self._x.copy(), u, fresh, age, produced, tau, truth.delta, truth.f, silent
-        )
+            self._t_s, self._x.copy(), u, fresh, age, produced_mean, B @ produced_mean,
+            truth.delta, truth.f, silent,
+        )  # fmt: skip
 
     def esc_statuses(self) -> list[EscStatus]:
         """Telemetry of the last step's produced forces, for the ESCs that are not silent."""

@@ -61,6 +61,26 @@ def test_surge_command_pushes_north_and_matches_rk4() -> None:
     assert abs(x[1]) < 1e-9 and abs(x[4]) < 1e-9 and abs(x[5]) < 1e-9
 
 
+def test_a_command_takes_effect_when_received_mid_step() -> None:
+    """Received 30 % into a step: the old command acts for the first 30 %, the new one for
+    the rest (not the whole step, which made it act early); the sample's forces are means."""
+    sim = make_sim()
+    sim.set_command(SURGE, 0.0)
+    sim.step(DT, 0.0)  # the step ending at now = 0: SURGE acting from here
+    x0 = sim.x
+    new = -SURGE
+    sim.set_command(new, 0.3 * DT)
+    sample = sim.step(DT, DT)
+    x = PLANT.step_rk4(x0, B @ SURGE, 0.3 * DT, 8)
+    x = PLANT.step_rk4(x, B @ new, 0.7 * DT, 8)
+    np.testing.assert_allclose(sample.x, x, atol=1e-15)
+    np.testing.assert_array_equal(sample.u, new)  # the command now applied, as sent
+    np.testing.assert_allclose(sample.tau, B @ (0.3 * SURGE + 0.7 * new), atol=1e-15)
+    # the next step runs on the new command alone
+    x = PLANT.step_rk4(sample.x, B @ new, DT, 8)
+    np.testing.assert_allclose(sim.step(DT, 2 * DT).x, x, atol=1e-15)
+
+
 def test_yaw_spin_keeps_psi_wrapped_and_steps_match_rk4() -> None:
     yaw = np.array([-0.1, 0.1, 0.1, -0.1])  # pure +N on the paper layout
     np.testing.assert_allclose((B @ yaw)[:2], 0.0, atol=1e-12)

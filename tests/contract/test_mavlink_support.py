@@ -20,22 +20,15 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from bridges import mavlink_dialect  # noqa: E402
+from bridges.mavlink_gcs import wait_until as poll_until  # noqa: E402
+from ftcap_hil.demo_cmd import free_ports  # noqa: E402
 
 DIALECT = mavlink_dialect.load()
 
 
 def free_udp_ports(n: int) -> list[int]:
     """``n`` distinct UDP ports free on 127.0.0.1 right now."""
-    socks = []
-    try:
-        for _ in range(n):
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.bind(("127.0.0.1", 0))
-            socks.append(s)
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
+    return free_ports(socket.SOCK_DGRAM, n)
 
 
 class RawPeer:
@@ -98,12 +91,7 @@ def send_datagram(port: int, payload: bytes) -> None:
 
 
 def wait_until(predicate: Callable[[], bool], timeout_s: float = 3.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.005)
-    return True
+    return poll_until(predicate, timeout_s, 0.005)
 
 
 def _mavlink_threads() -> list[threading.Thread]:

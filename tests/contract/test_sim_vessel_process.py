@@ -26,9 +26,10 @@ from bridges.can_dronecan import CanEscStatusSource, CanThrusterSink
 from bridges.can_force_map import ForceRawMap
 from bridges.can_hub import CanHub
 from bridges.mavlink_config import GCS_IDS, VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink_gcs import MavlinkGcsLink
+from bridges.mavlink_gcs import MavlinkGcsLink, wait_until
 from bridges.mavlink_vessel import FAILURE_ENABLE_PARAM, MavResult
 from bridges.zenoh_link import ZenohAllocatorLink, ZenohGcsLink, make_config
+from ftcap_hil.demo_cmd import free_ports
 from ftcap_hil.messages import FaultInjection, FaultKind
 from sim.esc_model import DEFAULT_ESC
 
@@ -41,18 +42,7 @@ START_TIMEOUT_S = 30.0
 
 
 def free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def wait_until(predicate: Callable[[], Any], timeout_s: float, poll_s: float = 0.02) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(poll_s)
-    return True
+    return free_ports(kind, 1)[0]
 
 
 class SimProcess:

@@ -39,9 +39,10 @@ from bridges.can_codec import CanFrame, DataType, RawCommandMsg, TransferAssembl
 from bridges.can_dronecan import CanEscStatusSource
 from bridges.can_hub_bus import CanHubBus
 from bridges.mavlink_config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink_gcs import MavlinkGcsLink
+from bridges.mavlink_gcs import MavlinkGcsLink, wait_until
 from bridges.zenoh_link import ZenohGcsLink, make_config
 from ftcap_hil.controllers import PoseController
+from ftcap_hil.demo_cmd import free_ports
 from ftcap_hil.messages import MalformedMessage, Odometry
 from ftcap_hil.plants import wrap_angle
 
@@ -52,18 +53,7 @@ RAW_MAX = 8191
 
 
 def free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def wait_until(predicate: Callable[[], Any], timeout_s: float, poll_s: float = 0.02) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(poll_s)
-    return True
+    return free_ports(kind, 1)[0]
 
 
 @pytest.hookimpl(hookwrapper=True)

@@ -9,9 +9,11 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
+
+from bridges.mavlink_gcs import wait_until
+from ftcap_hil.demo_cmd import free_ports
 
 OUR_PROCESSES = ("ftcap_hil.cli", "bridges.can_hub")
 
@@ -25,14 +27,7 @@ def ftcap_hil(*args: str) -> list[str]:
 
 def free_udp_ports(n: int) -> list[int]:
     """``n`` distinct UDP ports free on 127.0.0.1 right now."""
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
-    try:
-        for s in socks:
-            s.bind(("127.0.0.1", 0))
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
+    return free_ports(socket.SOCK_DGRAM, n)
 
 
 def is_ours_and_alive(pid: int) -> bool:
@@ -52,12 +47,7 @@ def child_pids(out: Path) -> dict[str, int]:
 
 
 def wait_for(predicate: Callable[[], bool], timeout_s: float, poll_s: float = 0.1) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(poll_s)
-    return True
+    return wait_until(predicate, timeout_s, poll_s)
 
 
 def reap(proc: subprocess.Popen[bytes], out: Path) -> None:

@@ -24,7 +24,7 @@ import textwrap
 import threading
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any
 
 import can
 import numpy as np
@@ -35,7 +35,6 @@ from bridges.can_dronecan import CanCommandSource, CanThrusterSink
 from bridges.can_force_map import ForceRawMap
 from ftcap_hil.messages import Mailbox
 
-T = TypeVar("T")
 WARMUP = 100
 
 ECHO = textwrap.dedent(
@@ -50,16 +49,9 @@ ECHO = textwrap.dedent(
 )
 
 
-class SignallingMailbox(Mailbox[T]):
-    """Mailbox that also wakes the benchmark; the stamp is still the one put() takes."""
-
-    def __init__(self, name: str) -> None:
-        super().__init__(name)
-        self.arrived = threading.Event()
-
-    def put(self, value: T, stamp_ns: int | None = None) -> None:
-        super().put(value, stamp_ns)
-        self.arrived.set()
+def signalling_mailbox(name: str) -> Mailbox[Any]:
+    """A Mailbox whose ``notify`` event wakes the benchmark; the stamp is taken in put()."""
+    return Mailbox(name, notify=threading.Event())
 
 
 class Path:
@@ -103,16 +95,18 @@ def setpoint_frames_path(sink: CanThrusterSink, rx: can.BusABC) -> Callable[[], 
 
 
 def setpoint_mailbox_path(sink: CanThrusterSink, source: CanCommandSource) -> Callable[[], int]:
-    box: SignallingMailbox[object] = SignallingMailbox("bench")
-    source.commands = box  # type: ignore[assignment]
+    box = signalling_mailbox("bench")
+    arrived = box.notify
+    assert arrived is not None
+    source.commands = box
     rng = np.random.default_rng(2)
 
     def run() -> int:
-        box.arrived.clear()
+        arrived.clear()
         u = rng.uniform(-1.0, 1.0, sink.force_map.m) * sink.force_map.u_max_abs
         t0 = time.monotonic_ns()
         sent = sink.send(u)
-        if not box.arrived.wait(1.0):
+        if not arrived.wait(1.0):
             raise RuntimeError(f"{source.bus.channel_info}: command lost (sent={sent})")
         slot = box.latest()
         assert slot is not None

@@ -31,7 +31,7 @@ import threading
 import time
 import timeit
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 import zenoh
@@ -51,20 +51,12 @@ from bridges.zenoh_link import (
 from ftcap_hil.messages import Mailbox, ThrusterCommand, WrenchSetpoint
 
 VESSEL = "bench"
-T = TypeVar("T")
 WARMUP = 100
 
 
-class SignallingMailbox(Mailbox[T]):
-    """A Mailbox that also wakes the benchmark; the stamp is still taken inside put()."""
-
-    def __init__(self, name: str) -> None:
-        super().__init__(name)
-        self.arrived = threading.Event()
-
-    def put(self, value: T, stamp_ns: int | None = None) -> None:
-        super().put(value, stamp_ns)
-        self.arrived.set()
+def signalling_mailbox(name: str) -> Mailbox[Any]:
+    """A Mailbox whose ``notify`` event wakes the benchmark; the stamp is taken in put()."""
+    return Mailbox(name, notify=threading.Event())
 
 
 class RawProbe:
@@ -164,8 +156,9 @@ def free_port() -> int:
 
 
 def run(samples: int, rate_hz: float, port: int, raw_port: int) -> list[str]:
-    setpoints: SignallingMailbox[WrenchSetpoint] = SignallingMailbox("setpoint")
-    commands: SignallingMailbox[ThrusterCommand] = SignallingMailbox("thruster_command")
+    setpoints: Mailbox[WrenchSetpoint] = signalling_mailbox("setpoint")
+    commands: Mailbox[ThrusterCommand] = signalling_mailbox("thruster_command")
+    assert setpoints.notify is not None and commands.notify is not None
     sp = WrenchSetpoint.checked([1200.0, -35.5, 310.25])
     cmd = ThrusterCommand.checked(np.linspace(-100.0, 100.0, 6))
     sp_bytes, cmd_bytes = encode_wrench_setpoint(sp), encode_thruster_command(cmd)
@@ -185,7 +178,7 @@ def run(samples: int, rate_hz: float, port: int, raw_port: int) -> list[str]:
         paths: dict[str, tuple[Callable[[], object], threading.Event, Callable[[], int]]] = {
             "setpoint link": (
                 lambda: gcs.publish_setpoint(sp),
-                setpoints.arrived,
+                setpoints.notify,
                 _stamp(setpoints),
             ),
             "setpoint raw": (lambda: up.publisher.put(sp_bytes), up.arrived, up.stamp),
@@ -196,7 +189,7 @@ def run(samples: int, rate_hz: float, port: int, raw_port: int) -> list[str]:
             ),
             "command link": (
                 lambda: alloc.publish_thruster_command(cmd),
-                commands.arrived,
+                commands.notify,
                 _stamp(commands),
             ),
             "command raw": (lambda: down.publisher.put(cmd_bytes), down.arrived, down.stamp),

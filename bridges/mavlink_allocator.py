@@ -18,7 +18,11 @@ In (dispatch thread -> mailboxes; invalid input is counted in the mailbox and dr
 Out (called from the loop thread; each returns False instead of raising on transport errors):
 
 * ``HEARTBEAT`` at 1 Hz from the dispatch thread (MAV_TYPE_ONBOARD_CONTROLLER,
-  MAV_AUTOPILOT_INVALID), status from :meth:`set_system_status`.
+  MAV_AUTOPILOT_INVALID), status from :meth:`set_system_status`. It starts as
+  ``MAV_STATE_BOOT``: the link (and the parameter protocol) is up before the control loop
+  runs, and a ground station must not take the heartbeat alone for "allocating". The daemon
+  reports ``STANDBY`` (setpoint stale: zero thrust) or ``ACTIVE`` (allocating) from its
+  first cycle on.
 * :meth:`send_thruster_commands` -> ``ACTUATOR_OUTPUT_STATUS``: ``actuator[i]`` = u_i in N
   (0-based vessel-file order), bit i of ``active`` set for i < n_thrusters, rest zero.
 * :meth:`send_status` -> ``FTCAP_STATUS`` (our dialect): tau demand / unallocated and the
@@ -190,6 +194,7 @@ class MavlinkAllocatorLink(PortOwner):
             role="allocator",
             mav_type="MAV_TYPE_ONBOARD_CONTROLLER",
             routes=routes,
+            status=SystemStatus.BOOT,
             heartbeat_period_s=heartbeat_period_s,
             poll_s=poll_s,
         )

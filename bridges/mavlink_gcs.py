@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from bridges.mavlink_allocator import AllocatorStatus
-from bridges.mavlink_codec import Severity, odometry_from_message
+from bridges.mavlink_codec import Severity, SystemStatus, odometry_from_message
 from bridges.mavlink_config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint, default_gcs_endpoint
 from bridges.mavlink_link import MavlinkPort, PortOwner, Route
 from bridges.mavlink_vessel import (
@@ -53,6 +53,7 @@ from ftcap_hil.messages import (
 
 Ids = tuple[int, int]
 _MAV_PARAM_TYPE_REAL32 = 9
+_STARTING = (SystemStatus.UNINIT, SystemStatus.BOOT)
 
 
 @dataclass(frozen=True)
@@ -213,6 +214,19 @@ class MavlinkGcsLink(PortOwner):
     def wait_heartbeat(self, ids: Ids, timeout_s: float = 3.0) -> bool:
         with self._cond:
             return self._cond.wait_for(lambda: ids in self._heartbeats, timeout_s)
+
+    def wait_ready(self, ids: Ids, timeout_s: float = 3.0) -> bool:
+        """A HEARTBEAT from ``ids`` whose system_status is past start-up (not UNINIT/BOOT).
+
+        The allocator's link heartbeats as BOOT until its control loop runs its first cycle.
+        """
+
+        def ready() -> bool:
+            beat = self._heartbeats.get(ids)
+            return beat is not None and beat.value.system_status not in _STARTING
+
+        with self._cond:
+            return self._cond.wait_for(ready, timeout_s)
 
     # --- sending ---
 

@@ -189,9 +189,13 @@ class MavlinkPort:
         return True
 
     def set_system_status(self, status: SystemStatus) -> None:
-        """Status reported from the next HEARTBEAT on."""
+        """Status reported from the next HEARTBEAT on; a change is announced at once (the
+        dispatch thread sends a HEARTBEAT within ``poll_s``) rather than up to a period late."""
+        status = SystemStatus(status)
         with self._heartbeat.lock:
-            self._heartbeat.status = SystemStatus(status)
+            if status != self._heartbeat.status:
+                self._heartbeat.status = status
+                self._heartbeat.next_ns = 0
 
     def send_heartbeat(self) -> bool:
         hb = self._heartbeat

@@ -91,6 +91,9 @@ class MavlinkStatus:
 
     def publish(self, st: AllocatorStatus) -> None:
         mav = self._mav
+        # The first publish comes from the first cycle: it ends the link's BOOT state.
+        state = mav.SystemStatus.STANDBY if st.setpoint_stale else mav.SystemStatus.ACTIVE
+        self._link.set_system_status(state)
         flags = mav.StatusFlag.NONE
         for on, flag in (
             (st.degraded, "DEGRADED"),

@@ -281,7 +281,8 @@ class Flight:
 
 
 def connect(link: Any, mission: Mission, inject: bool) -> tuple[str, int]:
-    """Heartbeats, SYS_FAILURE_EN, FTC_MODE, first ODOMETRY -> (mode name, t0 stamp)."""
+    """Heartbeats, allocator loop running, SYS_FAILURE_EN, FTC_MODE, first ODOMETRY
+    -> (mode name, t0 stamp)."""
     from bridges.mavlink_vessel import FAILURE_ENABLE_PARAM
     from ftcap_hil.daemon_cmd import MODE_CODES
 
@@ -293,6 +294,12 @@ def connect(link: Any, mission: Mission, inject: bool) -> tuple[str, int]:
                 "running, and on the expected UDP port?",
                 Exit.NO_ANSWER,
             )
+    if not link.wait_ready(link.allocator_ids, timeout):
+        raise GcsError(
+            f"the allocator {link.allocator_ids} still reports MAV_STATE_BOOT after "
+            f"{timeout:g} s: its control loop has not started (see its log)",
+            Exit.NO_ANSWER,
+        )
     if inject and link.set_param(link.vessel_ids, FAILURE_ENABLE_PARAM, 1) != 1:
         raise GcsError(f"the vessel did not accept {FAILURE_ENABLE_PARAM} = 1", Exit.NO_ANSWER)
     if mission.mode is not None:

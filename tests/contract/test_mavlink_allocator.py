@@ -66,9 +66,25 @@ def test_heartbeat_identifies_allocator_and_follows_status(pair) -> None:
     beat = gcs.wait_for("HEARTBEAT")
     assert (beat.get_srcSystem(), beat.get_srcComponent()) == ALLOCATOR_IDS
     assert beat.type == DIALECT.MAV_TYPE_ONBOARD_CONTROLLER
-    assert beat.system_status == SystemStatus.STANDBY
+    assert beat.system_status == SystemStatus.BOOT  # until the daemon's first cycle says
     link.set_system_status(SystemStatus.ACTIVE)
     assert gcs.wait_for("HEARTBEAT", lambda m: m.system_status == SystemStatus.ACTIVE)
+
+
+def test_a_status_change_is_announced_at_once_not_a_heartbeat_period_later() -> None:
+    link_port, gcs_port = free_udp_ports(2)
+    endpoint = MavlinkEndpoint.inbox(link_port, ALLOCATOR_IDS, (gcs_port,))
+    config = AllocatorLinkConfig(n_thrusters=4, max_wrench=MAX_WRENCH)
+    with RawPeer(f"udpin:127.0.0.1:{gcs_port}") as gcs:
+        with MavlinkAllocatorLink(config, endpoint, heartbeat_period_s=60.0) as link:
+            first = gcs.wait_for("HEARTBEAT")  # sent as the link starts
+            assert first is not None and first.system_status == SystemStatus.BOOT
+            link.set_system_status(SystemStatus.BOOT)  # no change: nothing extra is sent
+            link.set_system_status(SystemStatus.STANDBY)
+            since = len(gcs.received)
+            beat = gcs.wait_for("HEARTBEAT", timeout_s=2.0, since=since)
+            assert beat is not None and beat.system_status == SystemStatus.STANDBY
+            assert len(gcs.of_type("HEARTBEAT")) == 2  # the periodic one is a minute away
 
 
 def test_wrench_setpoint_arrives_in_mailbox(pair) -> None:

@@ -16,7 +16,7 @@ from bridges.mavlink_allocator import (
     MavlinkAllocatorLink,
     StatusFlag,
 )
-from bridges.mavlink_codec import Severity, quaternion_from_yaw
+from bridges.mavlink_codec import Severity, SystemStatus, quaternion_from_yaw
 from bridges.mavlink_config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink_gcs import MavlinkGcsLink
 from bridges.mavlink_params import ParamSpec
@@ -114,6 +114,15 @@ def topology() -> Iterator[tuple[MavlinkGcsLink, MavlinkAllocatorLink, MavlinkVe
     ):
         assert gcs.wait_heartbeat(ALLOCATOR_IDS) and gcs.wait_heartbeat(VESSEL_IDS)
         yield gcs, allocator, vessel
+
+
+def test_topology_gcs_waits_for_the_allocator_to_leave_boot(topology) -> None:
+    gcs, allocator, vessel = topology
+    assert gcs.wait_ready(VESSEL_IDS, 1.0)  # the vessel heartbeats ACTIVE from the start
+    assert not gcs.wait_ready(ALLOCATOR_IDS, 1.5)  # a heartbeat, but BOOT: not ready
+    assert gcs.heartbeat(ALLOCATOR_IDS).value.system_status == SystemStatus.BOOT
+    allocator.set_system_status(SystemStatus.STANDBY)
+    assert gcs.wait_ready(ALLOCATOR_IDS, 1.0)
 
 
 def test_topology_setpoints_telemetry_and_status_flow(topology) -> None:

@@ -167,14 +167,15 @@ def _check_running(sim: SimProcess, a: FakeAllocator, gcs: Any, router: Any) -> 
     ok = wait_until(
         lambda: (
             all(b.latest() for b in a.esc.mailboxes)
+            # NodeStatus follows the first esc.Status frames: wait for it, do not race it
+            and all(a.esc.node_status(node) for node in ESC_IDS)
             and gcs.odometry.latest()
             and router.odometry.latest()
         ),
         START_TIMEOUT_S,
     )
-    assert ok, f"no ESC status or odometry from the sim:\n{sim.log()}"
+    assert ok, f"no ESC status, ESC NodeStatus or odometry from the sim:\n{sim.log()}"
     assert a.rpm() == [0.0, 0.0, 0.0, 0.0]
-    assert a.esc.node_status(20) is not None  # ESC NodeStatus too
     t0 = gcs.odometry.latest().value.time_s
     time.sleep(0.5)
     assert gcs.odometry.latest().value.time_s > t0  # sim time advances

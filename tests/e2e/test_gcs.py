@@ -9,6 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from bridges.mavlink_allocator import AllocatorLinkConfig, MavlinkAllocatorLink
+from bridges.mavlink_config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink_vessel import MavlinkVesselLink
 from tests.e2e.test_demo_support import free_udp_ports, ftcap_hil
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(60)]
@@ -29,6 +32,29 @@ def test_gcs_gives_up_when_no_vessel_answers(tmp_path: Path) -> None:
     assert proc.returncode == 3
     assert b"no HEARTBEAT from the vessel" in proc.stderr
     assert time.monotonic() - started < 20.0
+    assert not (tmp_path / "out" / "results.json").exists()
+
+
+def test_gcs_does_not_fly_while_the_allocator_is_still_booting(tmp_path: Path) -> None:
+    # Both links heartbeat, but the allocator's says BOOT (its loop never ran a cycle): the
+    # mission must not start against a link whose control loop is not running.
+    gcs, allocator, vessel = free_udp_ports(3)
+    config = AllocatorLinkConfig(n_thrusters=4, max_wrench=(0.3, 0.3, 0.06))
+    with (
+        MavlinkAllocatorLink(config, MavlinkEndpoint.inbox(allocator, ALLOCATOR_IDS, (gcs,))),
+        MavlinkVesselLink(4, MavlinkEndpoint.inbox(vessel, VESSEL_IDS, (gcs,))),
+    ):
+        proc = subprocess.run(
+            ftcap_hil(
+                "gcs", "--mission", "paper-4.2-ex1", "--out", str(tmp_path / "out"),
+                "--gcs-port", str(gcs), "--allocator-port", str(allocator),
+                "--vessel-port", str(vessel), "--set", "gcs.connect_timeout_s=1.5",
+            ),
+            capture_output=True,
+            timeout=30,
+        )  # fmt: skip
+    assert proc.returncode == 3, proc.stderr
+    assert b"still reports MAV_STATE_BOOT" in proc.stderr, proc.stderr
     assert not (tmp_path / "out" / "results.json").exists()
 
 

@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 
+from bridges.mavlink_codec import SystemStatus
 from bridges.mavlink_gcs import MavlinkGcsLink
 from tests.e2e.conftest import RAW_MAX, Rig, SetpointLoop, latest_odometry, texts, wait_until
 
@@ -28,18 +29,28 @@ AXES = [
 U_LIMIT_N = 0.1  # thruster amplitude limit of the shipped vessel files: raw 8191
 
 
+def allocator_state(gcs: MavlinkGcsLink) -> SystemStatus | None:
+    beat = gcs.heartbeat(gcs.allocator_ids)
+    return None if beat is None else SystemStatus(beat.value.system_status)
+
+
 def test_setpoints_reach_the_thrusters_and_move_the_vessel(hil: Rig) -> None:
     gcs = hil.gcs()
     hil.start_allocator()
     hil.start_sim()
     tap = hil.tap()
     assert wait_until(lambda: gcs.odometry.latest() is not None, 20.0), hil.logs()
+    # HEARTBEAT.system_status: BOOT until the loop runs, then STANDBY (no setpoint: zero
+    # thrust) / ACTIVE (allocating)
+    assert gcs.wait_ready(gcs.allocator_ids, 20.0), hil.logs()
+    assert allocator_state(gcs) == SystemStatus.STANDBY
     reaction_ms, settle_ms = [], []
     for axis, (name, tau, signs) in enumerate(AXES):
         nu_before = latest_odometry(gcs).nu
         t0 = time.monotonic_ns()
         with SetpointLoop(gcs, tau=tau, period_s=0.1):
             time.sleep(2.0)
+            assert allocator_state(gcs) == SystemStatus.ACTIVE, name
         frames = tap.commands(t0)
         assert frames, (name, hil.logs())
         # the first frame after the new setpoint (wake_on_setpoint: that setpoint's own cycle),
@@ -66,6 +77,8 @@ def test_setpoints_reach_the_thrusters_and_move_the_vessel(hil: Rig) -> None:
         if float(r["monotonic_s"]) > since
     }
     assert applied and applied <= {f.raw for f in tap.commands(t0)}, applied
+    # the setpoints stopped: after the setpoint timeout the allocator is back in STANDBY
+    assert wait_until(lambda: allocator_state(gcs) == SystemStatus.STANDBY, 5.0)
     alloc = hil.procs["allocator"]
     alloc.send(signal.SIGTERM)
     assert alloc.wait(15.0) == 0, alloc.log()

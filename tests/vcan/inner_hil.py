@@ -289,6 +289,15 @@ def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
                     children,
                 )
             summary["heartbeats_monotonic"] = time.monotonic()
+            # Its heartbeat says BOOT until the allocator's loop has run a cycle: under TCG
+            # the core's set-up takes seconds after the link is up.
+            wait_for(
+                "the allocator's loop (HEARTBEAT past MAV_STATE_BOOT)",
+                functools.partial(gcs.wait_ready, gcs.allocator_ids, 0.1),
+                opts.start_timeout_s,
+                children,
+            )
+            summary["allocator_ready_monotonic"] = time.monotonic()
             enabled = gcs.set_param(gcs.vessel_ids, FAILURE_ENABLE_PARAM, 1, timeout_s=3.0)
             summary["sys_failure_en"] = enabled
             if enabled != 1:

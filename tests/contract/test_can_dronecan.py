@@ -45,6 +45,7 @@ from bridges.can_dronecan import (
 )
 from bridges.can_force_map import ForceRawMap, NonFiniteCommand
 from bridges.can_hub import CanHub
+from bridges.can_port_base import receipt_ns
 from ftcap_hil.messages import EscStatus
 
 pytestmark = pytest.mark.timeout(120)
@@ -331,3 +332,34 @@ def _vessel_main(channel: str, u_max: list[float]) -> int:
 
 if __name__ == "__main__":
     sys.exit(_vessel_main(sys.argv[1], [float(v) for v in sys.argv[2:]]))
+
+
+def test_receipt_stamp_from_the_interface_timestamp() -> None:
+    now_ns, wall = 5_000_000_000, 1_700_000_000.0
+    # kernel stamp 78 ms before now (float wall seconds: sub-microsecond rounding)
+    assert abs(receipt_ns(wall - 0.078, now_ns, wall) - (now_ns - 78_000_000)) < 1_000
+    assert receipt_ns(wall, now_ns, wall) == now_ns
+    assert receipt_ns(0.0, now_ns, wall) == now_ns  # no timestamp
+    assert receipt_ns(wall + 0.5, now_ns, wall) == now_ns  # from the future: not trusted
+    assert receipt_ns(wall - 5.0, now_ns, wall) == now_ns  # too old: not trusted
+
+
+def test_a_command_is_stamped_when_its_frame_arrived_not_when_it_was_handled() -> None:
+    # The Notifier thread may run long after the interface received the frame (the GIL, a
+    # busy vCPU): the command's stamp is the interface's receipt time.
+    fmap = ForceRawMap.create([10.0] * 4)
+    with open_can_bus("virtual", "ftcap-receipt") as bus, CanCommandSource(bus, fmap) as cmd:
+        (frame,) = encode_raw_command([1, 2, 3, 4], source_node_id=10, transfer_id=0)
+        before = time.monotonic_ns()
+        cmd.on_message_received(
+            can.Message(
+                timestamp=time.time() - 0.2,
+                arbitration_id=frame.can_id,
+                data=frame.data,
+                is_extended_id=True,
+            )
+        )
+        latest = cmd.commands.latest()
+        assert latest is not None
+        lag_s = (before - latest.stamp_ns) * 1e-9
+        assert 0.19 < lag_s < 0.25, lag_s

@@ -15,12 +15,13 @@ import time
 import pytest
 
 from bridges.mavlink_gcs import MavlinkGcsLink
-from tests.e2e.conftest import BusTap, Proc, Rig, SetpointLoop, wait_until
+from tests.e2e.conftest import RAW_MAX, BusTap, Proc, Rig, SetpointLoop, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 
 TAU = [0.1, 0.05, 0.0]
 COMMAND_TIMEOUT_S = 0.5  # vessel.toml sim.command_timeout_s
+U_LIMIT_N = 0.1  # thruster amplitude limit of the shipped vessel files: raw 8191
 ZERO = (0, 0, 0, 0)
 
 
@@ -55,9 +56,12 @@ def test_sigterm_sends_zero_last_and_exits_0(hil: Rig) -> None:
     assert all(f.raw == ZERO for f in frames if f.stamp_ns >= t_zero), frames[-5:]
     logged = hil.command_log_rows()
     assert logged[-1][1:] == [0.0] * 4 and any(r[1:] != [0.0] * 4 for r in logged[-5:]), logged[-5:]
-    # the sim got the zero as a command (fresh), not from its watchdog 0.5 s later
-    rows = [r for r in hil.record_rows() if float(r["monotonic_s"]) > t_zero * 1e-9 + 0.03]
-    assert rows and _u(rows[0]) == [0.0] * 4 and rows[0]["command_fresh"] == "1", rows[:1]
+    # the sim got the zero as a command (fresh), not from its watchdog 0.5 s later (judged
+    # on the sim's own record: its rows and the tap's frames are stamped by two processes)
+    rows = [r for r in hil.record_rows() if float(r["monotonic_s"]) > t_term * 1e-9]
+    first_zero = next((r for r in rows if _u(r) == [0.0] * 4), None)
+    assert first_zero is not None and first_zero["command_fresh"] == "1", first_zero
+    assert float(first_zero["command_age_s"]) < COMMAND_TIMEOUT_S, first_zero
     summary = re.search(r"stopped after (\d+) cycles, (\d+) overruns", alloc.log())
     assert summary is not None, alloc.log()
     print(
@@ -77,16 +81,21 @@ def test_sigkill_leaves_the_sim_watchdog_to_stop_the_thrusters(hil: Rig) -> None
     frames = tap.commands()
     last = frames[-1]
     assert last.raw != ZERO and ZERO not in [f.raw for f in frames[-10:]], frames[-10:]
-    t_last = last.stamp_ns * 1e-9
+    # Timing on the sim's own clock: the last command's receive time is a fresh row's stamp
+    # minus its command age (the tap's frames are stamped by another process).
     rows = hil.record_rows()
-    after = [r for r in rows if float(r["monotonic_s"]) > t_last + 0.05]
-    # the last command keeps acting until the watchdog fires ...
-    held = [r for r in after if float(r["monotonic_s"]) < t_last + COMMAND_TIMEOUT_S - 0.05]
-    assert held and all(_u(r) == _u(held[0]) and min(map(abs, _u(r))) > 0 for r in held), held
+    last_fresh = [r for r in rows if r["command_fresh"] == "1"][-1]
+    t_rx = float(last_fresh["monotonic_s"]) - float(last_fresh["command_age_s"])
+    after = [r for r in rows if float(r["monotonic_s"]) > t_rx + 0.05]
+    # the last command on the bus keeps acting until the watchdog fires ...
+    held = [r for r in after if float(r["monotonic_s"]) < t_rx + COMMAND_TIMEOUT_S - 0.05]
+    assert held and all(_u(r) == _u(held[0]) for r in held), held
+    raw = tuple(round(u * RAW_MAX / U_LIMIT_N) for u in _u(held[0]))
+    assert all(abs(a - b) <= 1 for a, b in zip(raw, last.raw, strict=True)), (raw, last.raw)
     # ... then the thrusters give zero, and keep giving zero
     first_zero = next(r for r in after if _u(r) == [0.0] * 4)
-    stopped_after = float(first_zero["monotonic_s"]) - t_last
-    assert COMMAND_TIMEOUT_S - 0.05 < stopped_after < COMMAND_TIMEOUT_S + 0.3, stopped_after
+    stopped_after = float(first_zero["monotonic_s"]) - t_rx
+    assert COMMAND_TIMEOUT_S <= stopped_after < COMMAND_TIMEOUT_S + 0.4, stopped_after
     tail = [r for r in after if float(r["monotonic_s"]) >= float(first_zero["monotonic_s"])]
     assert all(_u(r) == [0.0] * 4 and r["command_fresh"] == "0" for r in tail), tail[:3]
     assert float(tail[-1]["command_age_s"]) > 1.0, tail[-1]

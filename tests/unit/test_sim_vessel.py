@@ -25,7 +25,7 @@ from sim.vessel import (
     record_header,
     record_row,
 )
-from sim.vessel_cmd import load_config
+from sim.vessel_cmd import MAX_CATCH_UP_STEPS, VesselProcess, load_config
 
 THS = paper_four_thrusters(rate_limit=0.318359)
 B = effectiveness(THS)
@@ -313,3 +313,36 @@ def test_cli_module_imports_no_transport() -> None:
     assert "sim.vessel" in modules
     forbidden = ("can", "zenoh", "pymavlink", "dronecan", "bridges")
     assert [m for m in modules if m.split(".")[0] in forbidden] == []
+
+
+class _NoPorts:
+    """VesselPorts with nothing connected: no command, no fault, outputs dropped."""
+
+    def latest_command(self) -> None:
+        return None
+
+    def drain_faults(self) -> list[object]:
+        return []
+
+    def send_odometry(self, odom: object) -> None:
+        pass
+
+    def send_esc(self, statuses: object, reporting: object, now_ns: int) -> None:
+        pass
+
+
+def test_a_late_step_integrates_the_wall_time_that_passed_up_to_the_cap() -> None:
+    cfg = load_config(None, ["sim.rate_hz=10.0", "sim.realtime_factor=2.0"])
+    proc = VesselProcess(cfg, _NoPorts())  # type: ignore[arg-type]
+    nominal = 2.0 / 10.0  # sim seconds per step: realtime_factor / rate_hz
+    ms = 1_000_000
+    proc.step(1000 * ms)
+    assert proc.sim.t_s == pytest.approx(nominal)  # first step: the nominal one
+    proc.step(1100 * ms)  # on time
+    assert proc.sim.t_s == pytest.approx(2 * nominal)
+    proc.step(1330 * ms)  # 130 ms late: 0.23 s of wall time, 0.46 s of sim time
+    assert proc.sim.t_s == pytest.approx(2 * nominal + 0.46)
+    assert proc.lost_s == 0.0
+    proc.step(4330 * ms)  # a 3 s stall: MAX_CATCH_UP_STEPS nominal steps, the rest lost
+    assert proc.sim.t_s == pytest.approx(2 * nominal + 0.46 + MAX_CATCH_UP_STEPS * nominal)
+    assert proc.lost_s == pytest.approx(6.0 - MAX_CATCH_UP_STEPS * nominal)

@@ -82,6 +82,8 @@ class DaemonConfig:
     esc_timeout_s: float = 0.5
     status_period_s: float = 0.1
     wake_on_setpoint: bool = True
+    # time command averages over telemetry intervals by VesselClock (else by receipt stamps)
+    vessel_clock: bool = True
     dt_clamp: tuple[float, float] = (0.2, 5.0)  # dt for rate limits, in periods (PX4 clamps)
 
 
@@ -122,6 +124,40 @@ class CommandHistory:
         return None if acc is None else acc / total
 
 
+class VesselClock:
+    """Receipt stamps of telemetry corrected for their variable delay.
+
+    A state measured at vessel time ``t`` (``Odometry.time_s``) reaches this process after a
+    delay: the vessel's own computing, transport, this process's scheduling. Only the
+    variable part matters to the command average (a constant one shifts every interval
+    alike), and it was large in the qemu VM: tens of ms against a 283 ms estimation period.
+    The least-delayed sample of the last ``window`` gives the clock offset, as in NTP's
+    minimum filter or PX4's timesync: ``mapped = t + min(receipt - t)``.
+
+    The mapping assumes the vessel's clock runs at this clock's rate. It is not used (the
+    receipt stamp is) while it would move a stamp back by more than ``max_shift_s``: a
+    vessel clock running slower (a sim below real time), a jump, or a restart. Vessel time
+    going backwards restarts the filter.
+    """
+
+    def __init__(self, window: int = 50, max_shift_s: float = 0.25) -> None:
+        self._offsets: deque[int] = deque(maxlen=window)
+        self._last_t_ns: int | None = None
+        self._max_shift_ns = int(max_shift_s * 1e9)
+
+    def map(self, vessel_time_s: float, receipt_ns: int) -> int:
+        """The receipt stamp corrected to the least-delayed offset (class docstring)."""
+        if not math.isfinite(vessel_time_s):
+            return receipt_ns
+        t_ns = int(round(vessel_time_s * 1e9))
+        if self._last_t_ns is not None and t_ns < self._last_t_ns:
+            self._offsets.clear()
+        self._last_t_ns = t_ns
+        self._offsets.append(receipt_ns - t_ns)
+        mapped = t_ns + min(self._offsets)
+        return mapped if receipt_ns - mapped <= self._max_shift_ns else receipt_ns
+
+
 class AllocatorDaemon:
     def __init__(self, config: DaemonConfig, ports: Ports) -> None:
         self.config = config
@@ -137,7 +173,10 @@ class AllocatorDaemon:
             for box in ports.setpoints:
                 box.notify = self._wake
         self._history = CommandHistory(horizon_s=10 * config.estimation_period_s + 5.0)
-        self._est_sample: tuple[int, Odometry] | None = None  # (receive stamp, odometry)
+        # (receive stamp, odometry, the stamp that times the command average)
+        self._est_sample: tuple[int, Odometry, int] | None = None
+        self._clock = VesselClock()
+        self._clock_fed = (-1, -1)  # (receive stamp, mapped stamp) of the last odometry
         self._last_cycle_ns: int | None = None
         self._last_status_ns = 0
         self._flags: dict[str, Any] = {}
@@ -334,9 +373,13 @@ class AllocatorDaemon:
         ``estimation_period_s`` of telemetry; (None, None) in between."""
         if odom is None:
             return None, None
+        if stamp != self._clock_fed[0]:
+            mapped = self._clock.map(odom.time_s, stamp) if self.config.vessel_clock else stamp
+            self._clock_fed = (stamp, mapped)
+        at = self._clock_fed[1]
         prev = self._est_sample
         if prev is None:
-            self._est_sample = (stamp, odom)
+            self._est_sample = (stamp, odom, at)
             return None, None
         if stamp == prev[0]:
             return None, None
@@ -348,8 +391,8 @@ class AllocatorDaemon:
             dt = (stamp - prev[0]) * 1e-9
         if dt < 0.9 * self.config.estimation_period_s:
             return None, None
-        self._est_sample = (stamp, odom)
-        u_mean = self._history.mean(prev[0], stamp)
+        self._est_sample = (stamp, odom, at)
+        u_mean = self._history.mean(prev[2], at)
         if u_mean is None:
             return None, None
         x0 = np.concatenate([prev[1].eta, prev[1].nu])

@@ -34,6 +34,7 @@ _DAEMON_KEYS = {
     "esc_timeout_s",
     "status_period_s",
     "wake_on_setpoint",
+    "vessel_clock",
     "mode",
 }
 
@@ -113,6 +114,9 @@ def daemon_config_from(data: dict[str, Any], where: str) -> DaemonConfig:
     wake = d.get("wake_on_setpoint", True)
     if not isinstance(wake, bool):
         raise ConfigError(f"{where}.daemon.wake_on_setpoint: expected true/false, got {wake!r}")
+    vessel_clock = d.get("vessel_clock", True)
+    if not isinstance(vessel_clock, bool):
+        raise ConfigError(f"{where}.daemon.vessel_clock: expected true/false, got {vessel_clock!r}")
     return DaemonConfig(
         thrusters=ths,
         B=B,
@@ -125,6 +129,7 @@ def daemon_config_from(data: dict[str, Any], where: str) -> DaemonConfig:
         esc_timeout_s=_positive(d, "esc_timeout_s", 0.5),
         status_period_s=_positive(d, "status_period_s", 0.1),
         wake_on_setpoint=wake,
+        vessel_clock=vessel_clock,
     )
 
 

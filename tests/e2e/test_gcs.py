@@ -48,7 +48,7 @@ def test_gcs_does_not_fly_while_the_allocator_is_still_booting(tmp_path: Path) -
             ftcap_hil(
                 "gcs", "--mission", "paper-4.2-ex1", "--out", str(tmp_path / "out"),
                 "--gcs-port", str(gcs), "--allocator-port", str(allocator),
-                "--vessel-port", str(vessel), "--set", "gcs.connect_timeout_s=1.5",
+                "--vessel-port", str(vessel), "--set", "gcs.connect_timeout_s=4",
             ),
             capture_output=True,
             timeout=30,

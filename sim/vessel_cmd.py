@@ -7,9 +7,10 @@ Each step, on absolute wall-clock deadlines at ``sim.rate_hz``::
     step x realtime_factor -> ODOMETRY (MAVLink) + telemetry/odometry (Zenoh) at telemetry_rate_hz
     -> esc.Status per ESC (unless silent) at esc_status_rate_hz + ESC NodeStatus at 1 Hz
 
-A step that runs late integrates the time that really passed (up to ``MAX_CATCH_UP_STEPS``
-nominal steps; a longer stall loses the excess, counted in ``lost_s``): the plant keeps real
-time as a boat does when its computer is busy. Integrating a fixed 1/rate_hz per step instead
+A step that runs late integrates the time that really passed, in whole nominal steps (up to
+``MAX_CATCH_UP_STEPS``; a longer stall loses the excess, counted in ``lost_s``): the plant
+keeps real time as a boat does when its computer is busy, and sim time stays on the grid of
+nominal steps. Integrating a fixed 1/rate_hz per step instead
 slowed the plant down under load (a qemu TCG run: 185 overruns in 348 steps, sim time at 65 %
 of wall time) and weighted each step's command by sim time while the allocator weights it by
 wall time, a residual that the estimator read as a fault.
@@ -346,17 +347,17 @@ class VesselProcess:
         return sample
 
     def _elapsed_s(self, now_ns: int) -> float:
-        """Sim seconds for this step: wall time since the last step x realtime_factor
-        (module docstring), the nominal step on the first."""
+        """Sim seconds for this step (module docstring): as many nominal steps as periods
+        passed since the last step, so that sim time stays on the grid of nominal steps (an
+        offline run at the same step reproduces it); one on the first step."""
         last, self._last_step_ns = self._last_step_ns, now_ns
-        if last is None or now_ns <= last:
+        if last is None:
             return self.dt_s
-        elapsed = (now_ns - last) * 1e-9 * self.cfg.shell.realtime_factor
-        cap = MAX_CATCH_UP_STEPS * self.dt_s
-        if elapsed > cap:
-            self.lost_s += elapsed - cap
-            return cap
-        return elapsed
+        periods = max(1, round((now_ns - last) / self.period_ns))
+        if periods > MAX_CATCH_UP_STEPS:
+            self.lost_s += (periods - MAX_CATCH_UP_STEPS) * self.dt_s
+            periods = MAX_CATCH_UP_STEPS
+        return periods * self.dt_s
 
     def _inject(self, source: str, fault: Stamped[FaultInjection]) -> None:
         f = fault.value

@@ -155,9 +155,9 @@ def test_second_onset_flags_only_the_faulty_thrusters(tmp_path: Path) -> None:
     command averages then mismatched the vessel's motion by ~2 % of full scale at every
     large command change, and the few samples of the restarted window believed it."""
     shipped = Path(__file__).parents[2] / "ftcap_hil/data/hil/missions/paper-4.2-ex1-short.toml"
-    text = shipped.read_text().replace("duration = 140.0", "duration = 60.0")
-    assert "duration = 60.0" in text
-    mission = tmp_path / "ex1-to-60s.toml"
+    text = shipped.read_text().replace("duration = 140.0", "duration = 75.0")
+    assert "duration = 75.0" in text
+    mission = tmp_path / "ex1-to-75s.toml"
     mission.write_text(text)
     out = tmp_path / "out"
     proc = subprocess.Popen(
@@ -166,7 +166,7 @@ def test_second_onset_flags_only_the_faulty_thrusters(tmp_path: Path) -> None:
         stderr=subprocess.PIPE,
     )
     try:
-        _, stderr = proc.communicate(timeout=60.0 + 150)
+        _, stderr = proc.communicate(timeout=75.0 + 150)
     finally:
         reap(proc, out)
     assert proc.returncode == 0, stderr.decode()[-3000:]
@@ -174,13 +174,20 @@ def test_second_onset_flags_only_the_faulty_thrusters(tmp_path: Path) -> None:
     flagged = [ln for ln in log.splitlines() if "fault detected" in ln]
     assert not [ln for ln in flagged if "thruster 2 " in ln or "thruster 4 " in ln], flagged
     assert any("thruster 3 fault detected" in ln for ln in flagged), flagged
-    # Thruster 3 is out of the allocation from ~4 s after the onset (its command is saturated
-    # and constant until then, so delta_3 u_3 looks like a bias and delta_hat_3 falls over
-    # ~3 s): nothing but recovery probes (0.01 N) from 50 s on. Its delta_hat_3 stays below
-    # the 0.1 dead threshold but is not pinned near 0: one CI run measured 0.06-0.09 after a
-    # large command change (docs, known limitation). The healthy ones stay above the flag level.
-    late = [r for r in _rows(out) if r["t"] > 50.0]
-    u3 = [r["u_3"] for r in late]
-    assert late and all(abs(u) <= 0.0101 for u in u3), u3
-    healthy = [(r["delta_hat_2"], r["delta_hat_4"]) for r in late]
+    # When thruster 3 is found dead depends on which way the vessel turns to psi = pi (the
+    # sign of its heading error at 45 s, noise): one way its command saturates at -0.1 and
+    # delta_hat_3 reaches 0 within ~2 s; the other way it saturates at +0.1, delta_3 u_3 + f_3
+    # cannot be told from a bias while the command is constant, and it is found when the
+    # command leaves saturation, 11-14 s after the onset (measured). Either way: once
+    # delta_hat_3 is under the 0.1 dead threshold it stays there (not pinned near 0: one CI
+    # run measured 0.06-0.09 after a large command change) and thruster 3 gets nothing but
+    # recovery probes (0.01 N); the healthy ones stay above the flag level.
+    rows = [r for r in _rows(out) if r["t"] > 45.0]
+    t_dead = next((r["t"] for r in rows if r["delta_hat_3"] < 0.1), None)
+    assert t_dead is not None, [round(r["delta_hat_3"], 2) for r in rows]
+    after = [r for r in rows if r["t"] > t_dead + 0.6]  # the next cycle has it out
+    assert after and all(r["delta_hat_3"] < 0.1 for r in after), [r["delta_hat_3"] for r in after]
+    assert all(abs(r["u_3"]) <= 0.0101 for r in after), [r["u_3"] for r in after]
+    healthy = [(r["delta_hat_2"], r["delta_hat_4"]) for r in rows if r["t"] > 50.0]
     assert all(min(pair) > 0.85 for pair in healthy), healthy
+    print(f"\nthruster 3 found dead {t_dead - 45.2:.1f} s after the second onset")

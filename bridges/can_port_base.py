@@ -141,8 +141,8 @@ def receipt_ns(timestamp: float, now_ns: int, wall_s: float) -> int:
     kernel's SO_TIMESTAMPNS, taken when the frame reached the socket, before the receive
     thread waited for the scheduler and the GIL. Its age against ``wall_s`` (read together
     with ``now_ns``) moves the stamp back. A missing, future or implausibly old timestamp
-    gives ``now_ns``. Found in the qemu VM: callback stamps lagged the allocator's sends by a
-    median 78 ms (p99 390 ms), and the vessel applied each command that much late.
+    gives ``now_ns``. Found in the one-vCPU qemu VM: callback stamps lagged the allocator's
+    sends by a median 78 ms (p99 390 ms), and the vessel applied each command that much late.
     """
     age_s = wall_s - timestamp
     if timestamp <= 0.0 or not 0.0 <= age_s < MAX_RECEIPT_AGE_S:

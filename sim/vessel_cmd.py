@@ -3,17 +3,18 @@
 Each step, on absolute wall-clock deadlines at ``sim.rate_hz``::
 
     latest esc.RawCommand (CAN, with its age) -> fault injections (MAVLink
-    MAV_CMD_INJECT_FAILURE, Zenoh fault/inject) -> integrate the wall time since the last
-    step x realtime_factor -> ODOMETRY (MAVLink) + telemetry/odometry (Zenoh) at telemetry_rate_hz
-    -> esc.Status per ESC (unless silent) at esc_status_rate_hz + ESC NodeStatus at 1 Hz
+    MAV_CMD_INJECT_FAILURE, Zenoh fault/inject) -> integrate one nominal step
+    (realtime_factor / rate_hz of sim time) per period since the last step -> ODOMETRY
+    (MAVLink) + telemetry/odometry (Zenoh) at telemetry_rate_hz -> esc.Status per ESC
+    (unless silent) at esc_status_rate_hz + ESC NodeStatus at 1 Hz
 
 A step that runs late integrates the time that really passed, in whole nominal steps (up to
 ``MAX_CATCH_UP_STEPS``; a longer stall loses the excess, counted in ``lost_s``): the plant
 keeps real time as a boat does when its computer is busy, and sim time stays on the grid of
-nominal steps. Integrating a fixed 1/rate_hz per step instead
-slowed the plant down under load (a qemu TCG run: 185 overruns in 348 steps, sim time at 65 %
-of wall time) and weighted each step's command by sim time while the allocator weights it by
-wall time, a residual that the estimator read as a fault.
+nominal steps. One nominal step per late step instead slowed the plant down under load (a
+qemu TCG run: 185 overruns in 348 steps, sim time at 65 % of wall time) and weighted each
+step's command by sim time while the allocator weights it by wall time, a residual that the
+estimator read as a fault.
 
 Odometry carries the sim time in ``Odometry.time_s``. Configuration: the shipped
 ``ftcap_hil/data/hil/vessel.toml`` (or ``--config``) plus ``--set SECTION.KEY=VALUE``.

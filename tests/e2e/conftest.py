@@ -50,6 +50,12 @@ ALLOCATOR_NODE = 10
 ESC_IDS = (20, 21, 22, 23)
 START_TIMEOUT_S = 40.0  # a cold start on a loaded 2-core machine (zenoh router, mavgen cache)
 RAW_MAX = 8191
+U_LIMIT_N = 0.1  # thruster amplitude limit of the shipped vessel files: raw RAW_MAX
+
+
+def record_raw(row: dict[str, str]) -> tuple[int, ...]:
+    """The command in a sim ``--record`` row, in esc.RawCommand counts (as on the bus)."""
+    return tuple(round(float(row[f"u_T{i}_N"]) * RAW_MAX / U_LIMIT_N) for i in range(1, 5))
 
 
 def free_port(kind: int) -> int:

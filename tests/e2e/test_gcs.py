@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -17,18 +18,26 @@ from tests.e2e.test_demo_support import free_udp_ports, ftcap_hil
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(60)]
 
 
-def test_gcs_gives_up_when_no_vessel_answers(tmp_path: Path) -> None:
-    gcs, allocator, vessel = free_udp_ports(3)
-    started = time.monotonic()
-    proc = subprocess.run(
+def _fly(
+    out: Path, ports: Sequence[int], connect_timeout_s: float
+) -> subprocess.CompletedProcess[bytes]:
+    """``ftcap-hil gcs`` flying paper-4.2-ex1 with (gcs, allocator, vessel) UDP ports."""
+    gcs, allocator, vessel = ports
+    return subprocess.run(
         ftcap_hil(
-            "gcs", "--mission", "paper-4.2-ex1", "--out", str(tmp_path / "out"),
+            "gcs", "--mission", "paper-4.2-ex1", "--out", str(out),
             "--gcs-port", str(gcs), "--allocator-port", str(allocator),
-            "--vessel-port", str(vessel), "--set", "gcs.connect_timeout_s=1.5",
+            "--vessel-port", str(vessel), "--set", f"gcs.connect_timeout_s={connect_timeout_s:g}",
         ),
         capture_output=True,
         timeout=30,
     )  # fmt: skip
+
+
+def test_gcs_gives_up_when_no_vessel_answers(tmp_path: Path) -> None:
+    ports = free_udp_ports(3)
+    started = time.monotonic()
+    proc = _fly(tmp_path / "out", ports, connect_timeout_s=1.5)
     assert proc.returncode == 3
     assert b"no HEARTBEAT from the vessel" in proc.stderr
     assert time.monotonic() - started < 20.0
@@ -44,15 +53,7 @@ def test_gcs_does_not_fly_while_the_allocator_is_still_booting(tmp_path: Path) -
         MavlinkAllocatorLink(config, MavlinkEndpoint.inbox(allocator, ALLOCATOR_IDS, (gcs,))),
         MavlinkVesselLink(4, MavlinkEndpoint.inbox(vessel, VESSEL_IDS, (gcs,))),
     ):
-        proc = subprocess.run(
-            ftcap_hil(
-                "gcs", "--mission", "paper-4.2-ex1", "--out", str(tmp_path / "out"),
-                "--gcs-port", str(gcs), "--allocator-port", str(allocator),
-                "--vessel-port", str(vessel), "--set", "gcs.connect_timeout_s=4",
-            ),
-            capture_output=True,
-            timeout=30,
-        )  # fmt: skip
+        proc = _fly(tmp_path / "out", (gcs, allocator, vessel), connect_timeout_s=4.0)
     assert proc.returncode == 3, proc.stderr
     assert b"still reports MAV_STATE_BOOT" in proc.stderr, proc.stderr
     assert not (tmp_path / "out" / "results.json").exists()

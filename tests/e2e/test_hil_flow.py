@@ -15,7 +15,15 @@ import pytest
 
 from bridges.mavlink_codec import SystemStatus
 from bridges.mavlink_gcs import MavlinkGcsLink
-from tests.e2e.conftest import RAW_MAX, Rig, SetpointLoop, latest_odometry, texts, wait_until
+from tests.e2e.conftest import (
+    RAW_MAX,
+    Rig,
+    SetpointLoop,
+    latest_odometry,
+    record_raw,
+    texts,
+    wait_until,
+)
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 
@@ -26,7 +34,6 @@ AXES = [
     ("sway", [0.0, 0.1, 0.0], (1, -1, 1, -1)),
     ("yaw", [0.0, 0.0, 0.03], (-1, 1, 1, -1)),
 ]
-U_LIMIT_N = 0.1  # thruster amplitude limit of the shipped vessel files: raw 8191
 
 
 def allocator_state(gcs: MavlinkGcsLink) -> SystemStatus | None:
@@ -72,11 +79,7 @@ def test_setpoints_reach_the_thrusters_and_move_the_vessel(hil: Rig) -> None:
     # every command the sim applied during the last phase was a frame seen on the bus (the
     # tap is another process: give it time to catch up rather than race it)
     since = frames[0].stamp_ns * 1e-9
-    applied = {
-        tuple(round(float(r[f"u_T{i}_N"]) * RAW_MAX / U_LIMIT_N) for i in range(1, 5))
-        for r in hil.record_rows()
-        if float(r["monotonic_s"]) > since
-    }
+    applied = {record_raw(r) for r in hil.record_rows() if float(r["monotonic_s"]) > since}
     assert applied and wait_until(lambda: applied <= {f.raw for f in tap.commands()}, 3.0), (
         applied - {f.raw for f in tap.commands()}
     )

@@ -15,13 +15,12 @@ import time
 import pytest
 
 from bridges.mavlink_gcs import MavlinkGcsLink
-from tests.e2e.conftest import RAW_MAX, BusTap, Proc, Rig, SetpointLoop, wait_until
+from tests.e2e.conftest import BusTap, Proc, Rig, SetpointLoop, record_raw, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 
 TAU = [0.1, 0.05, 0.0]
 COMMAND_TIMEOUT_S = 0.5  # vessel.toml sim.command_timeout_s
-U_LIMIT_N = 0.1  # thruster amplitude limit of the shipped vessel files: raw 8191
 ZERO = (0, 0, 0, 0)
 
 
@@ -90,7 +89,7 @@ def test_sigkill_leaves_the_sim_watchdog_to_stop_the_thrusters(hil: Rig) -> None
     # the last command on the bus keeps acting until the watchdog fires ...
     held = [r for r in after if float(r["monotonic_s"]) < t_rx + COMMAND_TIMEOUT_S - 0.05]
     assert held and all(_u(r) == _u(held[0]) for r in held), held
-    raw = tuple(round(u * RAW_MAX / U_LIMIT_N) for u in _u(held[0]))
+    raw = record_raw(held[0])
     assert all(abs(a - b) <= 1 for a, b in zip(raw, last.raw, strict=True)), (raw, last.raw)
     # ... then the thrusters give zero, and keep giving zero
     first_zero = next(r for r in after if _u(r) == [0.0] * 4)

@@ -10,7 +10,7 @@ Measured in one run, interleaved sample by sample so every path sees the same ma
 * ``echo RTT`` (canhub only): a frame to a child process that echoes it back.
 
 Each path has a bus of its own: a ``virtual`` channel, or a hub running as its own process
-(``python -m bridges.can_hub --port 0``) as in deployment; both clients of a path live in
+(``ftcap-hil can-hub --port 0``) as in deployment; both clients of a path live in
 this process. Times include the send call.
 Usage: ``python bench/can_latency.py [--samples 2000] [--thrusters 8] [--gap-ms 1]``.
 """
@@ -29,11 +29,11 @@ from typing import Any
 import can
 import numpy as np
 
-from bridges.can_bus import open_can_bus
-from bridges.can_codec import decode_frames, encode_raw_command
-from bridges.can_dronecan import CanCommandSource, CanThrusterSink
-from bridges.can_force_map import ForceRawMap
-from ftcap_hil.messages import Mailbox
+from bridges.can_io.adapters import CanCommandSource, CanThrusterSink
+from bridges.can_io.bus import open_can_bus
+from bridges.can_io.codec import decode_frames, encode_raw_command
+from bridges.can_io.force_map import ForceRawMap
+from ftcap_hil.core.messages import Mailbox
 
 WARMUP = 100
 
@@ -117,7 +117,9 @@ def setpoint_mailbox_path(sink: CanThrusterSink, source: CanCommandSource) -> Ca
 
 def start_hub() -> tuple[subprocess.Popen[str], str]:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "bridges.can_hub", "--port", "0"], stdout=subprocess.PIPE, text=True
+        [sys.executable, "-m", "ftcap_hil", "can-hub", "--port", "0"],
+        stdout=subprocess.PIPE,
+        text=True,
     )
     assert proc.stdout is not None
     line = proc.stdout.readline()

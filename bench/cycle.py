@@ -19,9 +19,9 @@ import time
 
 import numpy as np
 
-from ftcap_hil.core import FtcapCore, Mode, Truth
-from ftcap_hil.scenario import load_scenario
-from sim.offline import run_mode
+from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.core.cycle import FtcapCore, Mode, Truth
+from ftcap_hil.runtime.offline import run_mode
 
 
 def replay_inputs(sc_name: str):  # type: ignore[no-untyped-def]

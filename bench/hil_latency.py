@@ -26,9 +26,9 @@ import time
 import can
 import numpy as np
 
-from bridges.can_codec import CanFrame, RawCommandMsg, decode_frames
-from bridges.can_hub_bus import CanHubBus
-from ftcap_hil.messages import MalformedMessage, WrenchSetpoint
+from bridges.can_io.codec import CanFrame, RawCommandMsg, decode_frames
+from bridges.can_io.hub_bus import CanHubBus
+from ftcap_hil.core.messages import MalformedMessage, WrenchSetpoint
 
 EXTRA_SETS: list[str] = os.environ.get("FTCAP_BENCH_SET", "").split()  # more allocator --set
 
@@ -80,7 +80,7 @@ def start_allocator(
         f"daemon.rate_hz={rate_hz}",
         "daemon.setpoint_timeout_s=5.0",
     ]
-    cmd = [sys.executable, "-m", "ftcap_hil.cli", "allocator"]
+    cmd = [sys.executable, "-m", "ftcap_hil", "allocator"]
     for s in sets:
         cmd += ["--set", s]
     return subprocess.Popen(cmd, stdout=open(log_path, "wb"), stderr=subprocess.STDOUT)
@@ -92,7 +92,7 @@ class HubProcess:
     def __enter__(self) -> HubProcess:
         port = free_port(socket.SOCK_STREAM)
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "bridges.can_hub", "--port", str(port)],
+            [sys.executable, "-m", "ftcap_hil", "can-hub", "--port", str(port)],
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
         )
@@ -195,9 +195,9 @@ def stats(name: str, us: np.ndarray, base: float | None = None) -> str:
 
 
 def run_latency(args: argparse.Namespace) -> None:
-    from bridges.mavlink_config import MavlinkEndpoint
-    from bridges.mavlink_gcs import MavlinkGcsLink
-    from bridges.zenoh_link import ZenohGcsLink, make_config
+    from bridges.mavlink.config import MavlinkEndpoint
+    from bridges.mavlink.gcs import MavlinkGcsLink
+    from bridges.zenoh_io.link import ZenohGcsLink, make_config
 
     mav_port, gcs_port, z_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
     with HubProcess() as hub:
@@ -236,8 +236,8 @@ def run_latency(args: argparse.Namespace) -> None:
 
 
 def run_rate(args: argparse.Namespace) -> None:
-    from bridges.mavlink_config import MavlinkEndpoint
-    from bridges.mavlink_gcs import MavlinkGcsLink
+    from bridges.mavlink.config import MavlinkEndpoint
+    from bridges.mavlink.gcs import MavlinkGcsLink
 
     mav_port, gcs_port, z_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
     log_path = "/tmp/bench-allocator-rate.log"

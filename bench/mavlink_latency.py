@@ -28,9 +28,9 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink import mavutil  # noqa: E402
 
-from bridges import mavlink_dialect  # noqa: E402
-from bridges.mavlink_allocator import AllocatorLinkConfig, MavlinkAllocatorLink  # noqa: E402
-from bridges.mavlink_config import ALLOCATOR_IDS, MavlinkEndpoint  # noqa: E402
+from bridges.mavlink import dialect as mavlink_dialect  # noqa: E402
+from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink  # noqa: E402
+from bridges.mavlink.config import ALLOCATOR_IDS, MavlinkEndpoint  # noqa: E402
 
 WARMUP = 100
 DIALECT = mavlink_dialect.load()

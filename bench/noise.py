@@ -17,10 +17,10 @@ import json
 
 import numpy as np
 
-from ftcap_hil.core import Mode
-from ftcap_hil.report import phase_metrics
-from ftcap_hil.scenario import Scenario, load_scenario
-from sim.offline import run_mode
+from ftcap_hil.config.scenario import Scenario, load_scenario
+from ftcap_hil.core.cycle import Mode
+from ftcap_hil.report.records import phase_metrics
+from ftcap_hil.runtime.offline import run_mode
 
 VARIANTS: dict[str, tuple[Mode, dict[str, object]]] = {
     "cap": (Mode.CAP, {}),

@@ -1,16 +1,16 @@
 """Regenerate docs/paper-results.md: every shipped paper scenario, every mode, per phase.
 
-    python bench/paper_tables.py > docs/paper-results.md
+python bench/paper_tables.py > docs/paper-results.md
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from ftcap_hil.core import Mode
-from ftcap_hil.report import results
-from ftcap_hil.scenario import load_scenario
-from sim.offline import run_modes
+from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.core.cycle import Mode
+from ftcap_hil.report.records import results
+from ftcap_hil.runtime.offline import run_modes
 
 RUNS = [
     ("paper-4.1", None, None),

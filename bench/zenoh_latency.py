@@ -36,19 +36,19 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from bridges.zenoh_codec import (
+from bridges.zenoh_io.codec import (
     decode_thruster_command,
     decode_wrench_setpoint,
     encode_thruster_command,
     encode_wrench_setpoint,
 )
-from bridges.zenoh_link import (
+from bridges.zenoh_io.link import (
     ZenohAllocatorLink,
     ZenohGcsLink,
     ZenohVesselLink,
     make_config,
 )
-from ftcap_hil.messages import Mailbox, ThrusterCommand, WrenchSetpoint
+from ftcap_hil.core.messages import Mailbox, ThrusterCommand, WrenchSetpoint
 
 VESSEL = "bench"
 WARMUP = 100

@@ -47,8 +47,8 @@ def listening_tcp(address: str, table: Path = Path("/proc/net/tcp")) -> tuple[bo
 
 def allocator_cycling(config: str, vessel: str, gap_s: float = 0.6) -> tuple[bool, str]:
     # The product's own Zenoh adapter: the check speaks exactly what a ground station speaks.
-    from bridges.zenoh_config import shipped_config_path
-    from bridges.zenoh_link import ZenohGcsLink, ZenohLinkError, load_config
+    from bridges.zenoh_io.config import shipped_config_path
+    from bridges.zenoh_io.link import ZenohGcsLink, ZenohLinkError, load_config
 
     path = Path(config)
     if not path.exists():  # as the allocator's zenoh.config: a file, else a shipped name

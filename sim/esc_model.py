@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ftcap_hil.messages import BoolArray, EscStatus, FloatArray
+from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The simulated vessel: true state, thrusters, true faults, command watchdog, ESC telemetry.
 
-Pure: no I/O, no clock. The process shell (``sim.vessel_cmd``) feeds it commands with their
-receive stamps, fault injections, and steps it on its own deadlines.
+Pure: no I/O, no clock. The process shell (``ftcap_hil.runtime.vessel_process``) feeds it
+commands with their receive stamps, fault injections, and steps it on its own deadlines.
 
 Per step of length ``dt_s`` (sim time), with the faults held over the step::
 
@@ -45,11 +45,11 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.core import Truth
-from ftcap_hil.geometry import ConfigError, ThrusterSet
-from ftcap_hil.messages import BoolArray, EscStatus, FaultInjection, FaultKind, FloatArray
-from ftcap_hil.plants import SurfaceVessel, wrap_angle
-from ftcap_hil.scenario import FaultSchedule
+from ftcap_hil.config.scenario import FaultSchedule
+from ftcap_hil.core.cycle import Truth
+from ftcap_hil.core.geometry import ConfigError, ThrusterSet
+from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, FaultKind, FloatArray
+from ftcap_hil.core.plants import SurfaceVessel, wrap_angle
 from sim.esc_model import DEFAULT_ESC, EscModel
 
 

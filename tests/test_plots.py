@@ -9,15 +9,19 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from ftcap_hil.core import Mode
-from ftcap_hil.plots import write_plots
-from ftcap_hil.scenario import load_scenario
-from sim.offline import run_modes
+from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.core.cycle import Mode
+from ftcap_hil.report.plots import write_plots
+from ftcap_hil.runtime.offline import run_modes
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 MODES = [Mode.NONE, Mode.CAP, Mode.FTCAP]
 COMMON = [
-    "virtual_inputs.png", "positions.png", "physical_inputs.png", "effectiveness.png", "bias.png",
+    "virtual_inputs.png",
+    "positions.png",
+    "physical_inputs.png",
+    "effectiveness.png",
+    "bias.png",
 ]
 
 
@@ -40,7 +44,10 @@ def _check_png(path: Path) -> None:
     ],
 )
 def test_write_plots(
-    tmp_path: Path, name: str, duration: float | None, expected: list[str],
+    tmp_path: Path,
+    name: str,
+    duration: float | None,
+    expected: list[str],
 ) -> None:
     sc = load_scenario(name)
     if duration is not None:

@@ -10,10 +10,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from ftcap_hil.core import Mode
-from ftcap_hil.report import results
-from ftcap_hil.scenario import Scenario, load_scenario
-from sim.offline import run_modes
+from ftcap_hil.config.scenario import Scenario, load_scenario
+from ftcap_hil.core.cycle import Mode
+from ftcap_hil.report.records import results
+from ftcap_hil.runtime.offline import run_modes
 
 ALL = [Mode.NONE, Mode.CAP, Mode.FTCAP, Mode.FTCAP_LITERAL, Mode.ORACLE]
 

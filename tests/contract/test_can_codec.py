@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from dronecan.transport import Frame, Transfer, TransferManager
 
-from bridges.can_codec import (
+from bridges.can_io.codec import (
     PRIORITY_HIGH,
     CanFrame,
     DataType,
@@ -29,8 +29,8 @@ from bridges.can_codec import (
     encode,
     encode_raw_command,
 )
-from bridges.can_force_map import RAW_MAX, ForceRawMap, NonFiniteCommand
-from ftcap_hil.messages import MalformedMessage
+from bridges.can_io.force_map import RAW_MAX, ForceRawMap, NonFiniteCommand
+from ftcap_hil.core.messages import MalformedMessage
 
 RAW_COMMAND_SIGNATURE = 0x217F5C87D7EC951D  # uavcan.equipment.esc.RawCommand, per DSDL
 

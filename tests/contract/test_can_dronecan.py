@@ -24,8 +24,14 @@ import can
 import numpy as np
 import pytest
 
-from bridges.can_bus import open_can_bus
-from bridges.can_codec import (
+from bridges.can_io.adapters import (
+    CanCommandSource,
+    CanEscStatusSink,
+    CanEscStatusSource,
+    CanThrusterSink,
+)
+from bridges.can_io.bus import open_can_bus
+from bridges.can_io.codec import (
     CanFrame,
     DataType,
     EscStatusMsg,
@@ -37,16 +43,10 @@ from bridges.can_codec import (
     encode,
     encode_raw_command,
 )
-from bridges.can_dronecan import (
-    CanCommandSource,
-    CanEscStatusSink,
-    CanEscStatusSource,
-    CanThrusterSink,
-)
-from bridges.can_force_map import ForceRawMap, NonFiniteCommand
-from bridges.can_hub import CanHub
-from bridges.can_port_base import receipt_ns
-from ftcap_hil.messages import EscStatus
+from bridges.can_io.force_map import ForceRawMap, NonFiniteCommand
+from bridges.can_io.hub import CanHub
+from bridges.can_io.ports import receipt_ns
+from ftcap_hil.core.messages import EscStatus
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -1,7 +1,7 @@
 """The loopback CAN hub and its python-can plugin, on real 127.0.0.1 sockets.
 
 Clients are real ``can.Bus`` objects (interface ``canhub``), the hub runs in-process or as
-``python -m bridges.can_hub``; one test drives a client living in another process.
+``ftcap-hil can-hub``; one test drives a client living in another process.
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from collections.abc import Callable, Iterator
 import can
 import pytest
 
-from bridges.can_bus import CanBusError, open_can_bus
-from bridges.can_hub import BANNER, CanHub, parse_channel
-from bridges.can_hub_bus import CanHubBus
+from bridges.can_io.bus import CanBusError, open_can_bus
+from bridges.can_io.hub import BANNER, CanHub, parse_channel
+from bridges.can_io.hub_bus import CanHubBus
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -54,7 +54,7 @@ def _msg(i: int, ext: bool = True) -> can.Message:
 
 def test_plugin_registered_through_entry_point() -> None:
     assert "canhub" in can.interfaces.VALID_INTERFACES
-    assert can.interfaces.BACKENDS["canhub"] == ("bridges.can_hub_bus", "CanHubBus")
+    assert can.interfaces.BACKENDS["canhub"] == ("bridges.can_io.hub_bus", "CanHubBus")
 
 
 def test_broadcast_to_every_other_client_not_back(open_bus: BusFactory) -> None:
@@ -213,7 +213,7 @@ def test_open_can_bus_choices(hub: CanHub) -> None:
 
 def _start_hub_process() -> tuple[subprocess.Popen[str], str]:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "bridges.can_hub", "--port", "0"],
+        [sys.executable, "-m", "ftcap_hil", "can-hub", "--port", "0"],
         stdout=subprocess.PIPE,
         text=True,
     )

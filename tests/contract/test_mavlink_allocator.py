@@ -8,16 +8,16 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from bridges.mavlink_allocator import (
+from bridges.mavlink.allocator import (
     AllocatorLinkConfig,
     AllocatorStatus,
     MavlinkAllocatorLink,
     StatusFlag,
 )
-from bridges.mavlink_codec import SystemStatus, quaternion_from_yaw
-from bridges.mavlink_config import ALLOCATOR_IDS, VESSEL_IDS, LinkConfigError, MavlinkEndpoint
-from bridges.mavlink_params import ParamSpec, ParamType
-from ftcap_hil.messages import ThrusterCommand
+from bridges.mavlink.codec import SystemStatus, quaternion_from_yaw
+from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, LinkConfigError, MavlinkEndpoint
+from bridges.mavlink.params import ParamSpec, ParamType
+from ftcap_hil.core.messages import ThrusterCommand
 from tests.contract.test_mavlink_support import (
     DIALECT,
     RawPeer,
@@ -325,9 +325,9 @@ def test_esc_status_reaches_the_ground_station() -> None:
     import math
     import socket
 
-    from bridges.mavlink_allocator import AllocatorLinkConfig, MavlinkAllocatorLink
-    from bridges.mavlink_config import MavlinkEndpoint
-    from bridges.mavlink_gcs import MavlinkGcsLink, wait_until
+    from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
+    from bridges.mavlink.config import MavlinkEndpoint
+    from bridges.mavlink.gcs import MavlinkGcsLink, wait_until
 
     def free() -> int:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:

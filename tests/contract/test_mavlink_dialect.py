@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from bridges import mavlink_dialect
+from bridges.mavlink import dialect as mavlink_dialect
 from tests.contract.test_mavlink_support import DIALECT
 
 

@@ -10,24 +10,24 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from bridges.mavlink_allocator import (
+from bridges.mavlink.allocator import (
     AllocatorLinkConfig,
     AllocatorStatus,
     MavlinkAllocatorLink,
     StatusFlag,
 )
-from bridges.mavlink_codec import Severity, SystemStatus, quaternion_from_yaw
-from bridges.mavlink_config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink_gcs import MavlinkGcsLink
-from bridges.mavlink_params import ParamSpec
-from bridges.mavlink_vessel import (
+from bridges.mavlink.codec import Severity, SystemStatus, quaternion_from_yaw
+from bridges.mavlink.config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.gcs import MavlinkGcsLink
+from bridges.mavlink.params import ParamSpec
+from bridges.mavlink.vessel import (
     FAILURE_ENABLE_PARAM,
     FAILURE_UNIT_SYSTEM_MOTOR,
     MAV_CMD_INJECT_FAILURE,
     MavlinkVesselLink,
     MavResult,
 )
-from ftcap_hil.messages import FaultInjection, FaultKind, Odometry, ThrusterCommand
+from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry, ThrusterCommand
 from tests.contract.test_mavlink_support import (
     DIALECT,
     RawPeer,

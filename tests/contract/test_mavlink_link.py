@@ -1,4 +1,4 @@
-"""bridges.mavlink_link: endpoint config, frame conversions, and the port on loopback."""
+"""bridges.mavlink.link: endpoint config, frame conversions, and the port on loopback."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from bridges.mavlink_codec import quaternion_from_yaw, yaw_from_quaternion
-from bridges.mavlink_config import (
+from bridges.mavlink.codec import quaternion_from_yaw, yaw_from_quaternion
+from bridges.mavlink.config import (
     ALLOCATOR_IDS,
     ALLOCATOR_PORT,
     GCS_PORT,
@@ -19,8 +19,8 @@ from bridges.mavlink_config import (
     default_gcs_endpoint,
     default_vessel_endpoint,
 )
-from bridges.mavlink_link import MavlinkPort, Route
-from ftcap_hil.messages import MalformedMessage
+from bridges.mavlink.link import MavlinkPort, Route
+from ftcap_hil.core.messages import MalformedMessage
 from tests.contract.test_mavlink_support import RawPeer, free_udp_ports, no_leaked_threads
 
 pytestmark = [pytest.mark.timeout(30)]

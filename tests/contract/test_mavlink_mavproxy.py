@@ -21,11 +21,11 @@ from pathlib import Path
 
 import pytest
 
-from bridges.mavlink_allocator import AllocatorLinkConfig, MavlinkAllocatorLink
-from bridges.mavlink_config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink_params import ParamSpec, ParamType
-from bridges.mavlink_vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
-from ftcap_hil.messages import FaultInjection, FaultKind
+from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
+from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.params import ParamSpec, ParamType
+from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
+from ftcap_hil.core.messages import FaultInjection, FaultKind
 from tests.contract.test_mavlink_support import free_udp_ports, no_leaked_threads, wait_until
 
 MAVPROXY = Path(sys.executable).with_name("mavproxy.py")

@@ -1,4 +1,4 @@
-"""The parameter table rules of bridges.mavlink_params (pure, no sockets)."""
+"""The parameter table rules of bridges.mavlink.params (pure, no sockets)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from bridges.mavlink_config import LinkConfigError
-from bridges.mavlink_params import ParamServer, ParamSpec, ParamType
+from bridges.mavlink.config import LinkConfigError
+from bridges.mavlink.params import ParamServer, ParamSpec, ParamType
 
 
 def _server() -> ParamServer:

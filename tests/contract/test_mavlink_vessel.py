@@ -9,9 +9,9 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from bridges.mavlink_codec import yaw_from_quaternion
-from bridges.mavlink_config import VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink_vessel import (
+from bridges.mavlink.codec import yaw_from_quaternion
+from bridges.mavlink.config import VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.vessel import (
     FAILURE_ENABLE_PARAM,
     FAILURE_UNIT_SYSTEM_MOTOR,
     MAV_CMD_INJECT_FAILURE,
@@ -20,7 +20,7 @@ from bridges.mavlink_vessel import (
     MavResult,
     decode_inject_failure,
 )
-from ftcap_hil.messages import FaultInjection, FaultKind, Odometry
+from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry
 from tests.contract.test_mavlink_support import (
     DIALECT,
     RawPeer,

@@ -21,16 +21,16 @@ from typing import Any
 import numpy as np
 import pytest
 
-from bridges.can_bus import open_can_bus
-from bridges.can_dronecan import CanEscStatusSource, CanThrusterSink
-from bridges.can_force_map import ForceRawMap
-from bridges.can_hub import CanHub
-from bridges.mavlink_config import GCS_IDS, VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink_gcs import MavlinkGcsLink, wait_until
-from bridges.mavlink_vessel import FAILURE_ENABLE_PARAM, MavResult
-from bridges.zenoh_link import ZenohAllocatorLink, ZenohGcsLink, make_config
-from ftcap_hil.demo_cmd import free_ports
-from ftcap_hil.messages import FaultInjection, FaultKind
+from bridges.can_io.adapters import CanEscStatusSource, CanThrusterSink
+from bridges.can_io.bus import open_can_bus
+from bridges.can_io.force_map import ForceRawMap
+from bridges.can_io.hub import CanHub
+from bridges.mavlink.config import GCS_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.gcs import MavlinkGcsLink, wait_until
+from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavResult
+from bridges.zenoh_io.link import ZenohAllocatorLink, ZenohGcsLink, make_config
+from ftcap_hil.apps.demo import free_ports
+from ftcap_hil.core.messages import FaultInjection, FaultKind
 from sim.esc_model import DEFAULT_ESC
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
@@ -46,12 +46,12 @@ def free_port(kind: int) -> int:
 
 
 class SimProcess:
-    """``python -m ftcap_hil.cli sim ...`` with its log in a file."""
+    """``python -m ftcap_hil sim ...`` with its log in a file."""
 
     def __init__(self, tmp: Path, args: list[str]) -> None:
         self.log_path = tmp / "sim.log"
         self.record = tmp / "record.csv"
-        cmd = [sys.executable, "-m", "ftcap_hil.cli", "sim", "--record", str(self.record), *args]
+        cmd = [sys.executable, "-m", "ftcap_hil", "sim", "--record", str(self.record), *args]
         self._log = open(self.log_path, "w")
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, cwd=tmp)
 

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from bridges.zenoh_codec import (
+from bridges.zenoh_io.codec import (
     MAX_PAYLOAD_BYTES,
     AllocatorStatus,
     ZenohKeys,
@@ -26,7 +26,7 @@ from bridges.zenoh_codec import (
     encode_thruster_command,
     encode_wrench_setpoint,
 )
-from ftcap_hil.messages import (
+from ftcap_hil.core.messages import (
     FaultInjection,
     FaultKind,
     MalformedMessage,
@@ -244,5 +244,8 @@ def test_status_decoder_refuses(field: str, value: object) -> None:
 
 
 def test_pure_modules_do_not_import_zenoh() -> None:
-    code = "import sys, bridges.zenoh_codec, bridges.zenoh_config; sys.exit('zenoh' in sys.modules)"
+    code = (
+        "import sys, bridges.zenoh_io.codec, bridges.zenoh_io.config;"
+        " sys.exit('zenoh' in sys.modules)"
+    )
     assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0

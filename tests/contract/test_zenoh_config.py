@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from bridges.zenoh_config import (
+from bridges.zenoh_io.config import (
     SHIPPED_CONFIGS,
     ZenohConfigError,
     ZenohRole,
@@ -21,7 +21,7 @@ from bridges.zenoh_config import (
     parse_override,
     shipped_config_path,
 )
-from bridges.zenoh_link import apply_overrides, load_config, make_config, validate_config
+from bridges.zenoh_io.link import apply_overrides, load_config, make_config, validate_config
 
 EXPECTED_ROLE = {"allocator": ZenohRole.ROUTER, "vessel": ZenohRole.CLIENT, "gcs": ZenohRole.CLIENT}
 

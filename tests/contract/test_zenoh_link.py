@@ -21,16 +21,16 @@ import numpy as np
 import pytest
 import zenoh
 
-from bridges.zenoh_codec import AllocatorStatus
-from bridges.zenoh_config import ZenohConfigError
-from bridges.zenoh_link import (
+from bridges.zenoh_io.codec import AllocatorStatus
+from bridges.zenoh_io.config import ZenohConfigError
+from bridges.zenoh_io.link import (
     ZenohAllocatorLink,
     ZenohGcsLink,
     ZenohLinkError,
     ZenohVesselLink,
     make_config,
 )
-from ftcap_hil.messages import (
+from ftcap_hil.core.messages import (
     FaultInjection,
     FaultKind,
     ThrusterCommand,
@@ -45,8 +45,8 @@ TIMEOUT_S = 10.0
 # The simulated vessel's side, in its own process: reports on stdout, one JSON object a line.
 VESSEL_PROCESS = """
 import json, sys, threading, time
-from bridges.zenoh_link import ZenohVesselLink, make_config
-from ftcap_hil.messages import Odometry
+from bridges.zenoh_io.link import ZenohVesselLink, make_config
+from ftcap_hil.core.messages import Odometry
 
 def say(**event):
     print(json.dumps(event), flush=True)
@@ -332,7 +332,7 @@ def test_process_that_forgets_shutdown_still_exits(port: int) -> None:
     # zenoh-python joins its callback threads at exit: an open link must not hang the process
     code = (
         "import sys\n"
-        "from bridges.zenoh_link import ZenohAllocatorLink, ZenohGcsLink, make_config\n"
+        "from bridges.zenoh_io.link import ZenohAllocatorLink, ZenohGcsLink, make_config\n"
         "port = int(sys.argv[1])\n"
         "allocator = ZenohAllocatorLink('testship', make_config('router', port))\n"
         "gcs = ZenohGcsLink('testship', make_config('client', port))\n"

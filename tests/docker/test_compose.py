@@ -60,7 +60,7 @@ from tests.docker.test_compose_local import (
 
 def mission_budget_s(argv: list[str]) -> float:
     """Seconds the ground station should need: --duration, else the mission's own."""
-    from ftcap_hil.mission import load_mission
+    from ftcap_hil.config.mission import load_mission
 
     if "--duration" in argv:
         return float(argv[argv.index("--duration") + 1])
@@ -69,8 +69,8 @@ def mission_budget_s(argv: list[str]) -> float:
 
 def check_published_mavlink(run: LocalCompose) -> dict[str, float]:
     """A host GCS (MAVProxy, QGroundControl) on the published ports hears both components."""
-    from bridges.mavlink_config import MavlinkEndpoint
-    from bridges.mavlink_gcs import MavlinkGcsLink
+    from bridges.mavlink.config import MavlinkEndpoint
+    from bridges.mavlink.gcs import MavlinkGcsLink
 
     published = [
         int(str(p).split(":")[-1].split("/")[0])

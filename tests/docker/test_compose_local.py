@@ -144,9 +144,7 @@ def local_executable(argv: list[str]) -> list[str]:
     head, rest = argv[0], argv[1:]
     if head == "ftcap-hil":
         script = Path(sys.executable).parent / "ftcap-hil"
-        return (
-            [str(script)] if script.exists() else [sys.executable, "-m", "ftcap_hil.cli"]
-        ) + rest
+        return ([str(script)] if script.exists() else [sys.executable, "-m", "ftcap_hil"]) + rest
     if head in ("python", "python3"):
         return [sys.executable, *rest]
     if head == "/bin/sh":
@@ -244,7 +242,7 @@ def zenoh_router_argv(name: str, spec: Mapping[str, Any], world: LocalWorld) -> 
     assert image.startswith("eclipse/zenoh:"), f"{name}: no local stand-in for image {image!r}"
     args = world.argv(argv_of(spec.get("command")), name)
     assert len(args) == 2 and args[0] in ("-c", "--config"), f"{name}: zenohd {args}"
-    from bridges.zenoh_link import load_config
+    from bridges.zenoh_io.link import load_config
 
     load_config(args[1])  # the product's own check, on the router config as mapped here
     return [sys.executable, "-c", ZENOH_ROUTER_STANDIN, args[1]]

@@ -175,7 +175,7 @@ def test_all_interface_binds_only_behind_loopback_published_ports() -> None:
 
 @pytest.mark.parametrize("files", FILE_SETS.values(), ids=FILE_SETS.keys())
 def test_can_stays_on_loopback_and_set_keys_exist(files: tuple[Path, ...]) -> None:
-    from bridges.can_hub import check_loopback, parse_channel
+    from bridges.can_io.hub import check_loopback, parse_channel
 
     image = read_image()
     for name, spec in _services(files).items():
@@ -201,8 +201,8 @@ def _zenoh_conf(name: str) -> Any:
 
 
 def test_the_router_departs_from_the_policy_only_by_its_container_listen() -> None:
-    from bridges.zenoh_config import ZenohConfigError
-    from bridges.zenoh_link import apply_overrides, validate_config
+    from bridges.zenoh_io.config import ZenohConfigError
+    from bridges.zenoh_io.link import apply_overrides, validate_config
 
     conf = _zenoh_conf("router.json5")
     assert json.loads(conf.get_json("mode")) == "router"
@@ -221,8 +221,8 @@ def test_the_router_departs_from_the_policy_only_by_its_container_listen() -> No
 
 
 def test_the_clients_pass_the_product_check_as_they_are() -> None:
-    from bridges.zenoh_config import ZenohRole
-    from bridges.zenoh_link import validate_config
+    from bridges.zenoh_io.config import ZenohRole
+    from bridges.zenoh_io.link import validate_config
 
     assert validate_config(_zenoh_conf("client.json5"), "client.json5") is ZenohRole.CLIENT
 
@@ -252,7 +252,7 @@ def _behaviour(argv: list[str]) -> tuple[str, list[str], list[str]]:
 def test_compose_flies_what_ftcap_hil_demo_flies() -> None:
     """Same default mission, same flags and the same non-address overrides as the local demo
     (`ftcap-hil demo`), so the two runs compare: only the addresses differ."""
-    from ftcap_hil import demo_cmd
+    from ftcap_hil.apps import demo as demo_cmd
 
     image = read_image()
     services = _services((COMPOSE,))
@@ -264,6 +264,6 @@ def test_compose_flies_what_ftcap_hil_demo_flies() -> None:
     }
     for name, argv in demo.items():
         ours = container_argv(services[name], image)
-        assert _behaviour(ours) == _behaviour(argv[argv.index("ftcap_hil.cli") + 1 :]), name
+        assert _behaviour(ours) == _behaviour(argv[argv.index("ftcap_hil") + 1 :]), name
     gcs = container_argv(services["gcs"], image)
     assert gcs[gcs.index("--mission") + 1] == demo_cmd.DEFAULT_MISSION

@@ -7,7 +7,7 @@ Topology of one rig (every port chosen free per test, loopback only, no multicas
                       --> WRENCH_SETPOINT, PARAM -->                       (also to G)
                       --> COMMAND_LONG (faults), PARAM ------------------------------------>
     zenoh: the allocator is the router on tcp/127.0.0.1:Z; the sim and the test are clients
-    CAN:   `python -m bridges.can_hub --port 0`; allocator (node 10), sim (ESC nodes 20..23)
+    CAN:   `ftcap-hil can-hub --port 0`; allocator (node 10), sim (ESC nodes 20..23)
            and the test's tap are its clients
 
 Every process is started by the ``hil`` fixture and killed there by PID at teardown; the
@@ -35,16 +35,16 @@ import can
 import numpy as np
 import pytest
 
-from bridges.can_codec import CanFrame, DataType, RawCommandMsg, TransferAssembler
-from bridges.can_dronecan import CanEscStatusSource
-from bridges.can_hub_bus import CanHubBus
-from bridges.mavlink_config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink_gcs import MavlinkGcsLink, wait_until
-from bridges.zenoh_link import ZenohGcsLink, make_config
-from ftcap_hil.controllers import PoseController
-from ftcap_hil.demo_cmd import free_ports
-from ftcap_hil.messages import MalformedMessage, Odometry
-from ftcap_hil.plants import wrap_angle
+from bridges.can_io.adapters import CanEscStatusSource
+from bridges.can_io.codec import CanFrame, DataType, RawCommandMsg, TransferAssembler
+from bridges.can_io.hub_bus import CanHubBus
+from bridges.mavlink.config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.gcs import MavlinkGcsLink, wait_until
+from bridges.zenoh_io.link import ZenohGcsLink, make_config
+from ftcap_hil.apps.demo import free_ports
+from ftcap_hil.core.controllers import PoseController
+from ftcap_hil.core.messages import MalformedMessage, Odometry
+from ftcap_hil.core.plants import wrap_angle
 
 ALLOCATOR_NODE = 10
 ESC_IDS = (20, 21, 22, 23)
@@ -192,7 +192,7 @@ class Rig:
         return proc
 
     def start_hub(self) -> None:
-        hub = self._spawn("hub", ["-m", "bridges.can_hub", "--port", "0"])
+        hub = self._spawn("hub", ["-m", "ftcap_hil", "can-hub", "--port", "0"])
         assert hub.wait_log(r"can_hub listening on \S+:\d+"), hub.log()
         m = re.search(r"can_hub listening on (\S+:\d+)", hub.log())
         assert m is not None
@@ -206,7 +206,7 @@ class Rig:
             f'mavlink.peers=["127.0.0.1:{self.gcs_port}"]',
             f"zenoh.overrides=['listen/endpoints:[\"tcp/127.0.0.1:{self.zenoh_port}\"]']",
         ]
-        args = ["-m", "ftcap_hil.cli", *(["-vv"] if verbose else []), "allocator"]
+        args = ["-m", "ftcap_hil", *(["-vv"] if verbose else []), "allocator"]
         args += ["--command-log", str(self.command_log)]
         for s in [*base, *sets]:
             args += ["--set", s]
@@ -222,7 +222,7 @@ class Rig:
             f'mavlink.peers=["127.0.0.1:{self.alloc_port}", "127.0.0.1:{self.gcs_port}"]',
             f"zenoh.connect=tcp/127.0.0.1:{self.zenoh_port}",
         ]
-        cmd = ["-m", "ftcap_hil.cli", "sim", "--record", str(self.record), *args]
+        cmd = ["-m", "ftcap_hil", "sim", "--record", str(self.record), *args]
         for s in [*base, *sets]:
             cmd += ["--set", s]
         proc = self._spawn("sim", cmd)

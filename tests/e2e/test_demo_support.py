@@ -12,17 +12,15 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from bridges.mavlink_gcs import wait_until
-from ftcap_hil.demo_cmd import free_ports
+from bridges.mavlink.gcs import wait_until
+from ftcap_hil.apps.demo import free_ports
 
-OUR_PROCESSES = ("ftcap_hil.cli", "bridges.can_hub")
+OUR_PROCESSES = ("ftcap_hil", "ftcap-hil")
 
 
 def ftcap_hil(*args: str) -> list[str]:
     script = Path(sys.executable).with_name("ftcap-hil")
-    return (
-        [str(script), *args] if script.exists() else [sys.executable, "-m", "ftcap_hil.cli", *args]
-    )
+    return [str(script), *args] if script.exists() else [sys.executable, "-m", "ftcap_hil", *args]
 
 
 def free_udp_ports(n: int) -> list[int]:

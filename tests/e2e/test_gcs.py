@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from bridges.mavlink_allocator import AllocatorLinkConfig, MavlinkAllocatorLink
-from bridges.mavlink_config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink_vessel import MavlinkVesselLink
+from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
+from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.vessel import MavlinkVesselLink
 from tests.e2e.test_demo_support import free_udp_ports, ftcap_hil
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(60)]

@@ -9,9 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ftcap_hil.geometry import ConfigError
-from ftcap_hil.messages import FaultKind
-from ftcap_hil.mission import (
+from ftcap_hil.config.mission import (
     FlightRecorder,
     Injection,
     injection_plan,
@@ -19,7 +17,9 @@ from ftcap_hil.mission import (
     load_mission,
     shipped_missions,
 )
-from ftcap_hil.report import column_names
+from ftcap_hil.core.geometry import ConfigError
+from ftcap_hil.core.messages import FaultKind
+from ftcap_hil.report.records import column_names
 
 W, B, S, OFF, OK = FaultKind.WEAK, FaultKind.BIAS, FaultKind.STUCK, FaultKind.OFF, FaultKind.OK
 

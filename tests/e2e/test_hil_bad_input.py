@@ -20,8 +20,8 @@ import pytest
 import zenoh
 from pymavlink import mavutil
 
-from bridges import mavlink_dialect
-from bridges.zenoh_link import make_config
+from bridges.mavlink import dialect as mavlink_dialect
+from bridges.zenoh_io.link import make_config
 from tests.e2e.conftest import ALLOCATOR_NODE, RAW_MAX, RawFrame, Rig, SetpointLoop, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]

@@ -17,10 +17,10 @@ import time
 import numpy as np
 import pytest
 
-from bridges.mavlink_config import VESSEL_IDS
-from bridges.mavlink_gcs import MavlinkGcsLink
-from bridges.mavlink_vessel import FAILURE_ENABLE_PARAM, MavResult
-from ftcap_hil.messages import FaultInjection, FaultKind
+from bridges.mavlink.config import VESSEL_IDS
+from bridges.mavlink.gcs import MavlinkGcsLink
+from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavResult
+from ftcap_hil.core.messages import FaultInjection, FaultKind
 from tests.e2e.conftest import Rig, SetpointLoop, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]

@@ -13,8 +13,8 @@ import time
 import numpy as np
 import pytest
 
-from bridges.mavlink_codec import SystemStatus
-from bridges.mavlink_gcs import MavlinkGcsLink
+from bridges.mavlink.codec import SystemStatus
+from bridges.mavlink.gcs import MavlinkGcsLink
 from tests.e2e.conftest import (
     RAW_MAX,
     Rig,

@@ -3,8 +3,8 @@
 Scenario: a 30 s segment of ``paper-4.2-ex2-bias008`` (station keeping at the origin,
 thruster 2 dead with a 0.08 N bias), the fault starting 9.23 s in, flown twice:
 
-* offline: ``sim.offline.run_mode`` (ftcap), RK4 truth, trapezoid inversion, eq. (24) with
-  the paper's gains, T_s = 0.28 s;
+* offline: ``ftcap_hil.runtime.offline.run_mode`` (ftcap), RK4 truth, trapezoid inversion,
+  eq. (24) with the paper's gains, T_s = 0.28 s;
 * HIL: the test runs eq. (24) at T_s against the live processes. It acts on the ODOMETRY
   sample at exactly k T_s of sim time (the sim publishes every 20 ms step, 0.28 = 14 steps),
   so its setpoint, the allocation and the RawCommand reach the sim before its next step: the
@@ -40,10 +40,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from ftcap_hil.controllers import PoseController
-from ftcap_hil.core import Mode
-from ftcap_hil.scenario import parse_scenario
-from sim.offline import run_mode
+from ftcap_hil.config.scenario import parse_scenario
+from ftcap_hil.core.controllers import PoseController
+from ftcap_hil.core.cycle import Mode
+from ftcap_hil.runtime.offline import run_mode
 from tests.e2e.conftest import Rig, latest_odometry, odometry_state, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]

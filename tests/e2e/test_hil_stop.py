@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from bridges.mavlink_gcs import MavlinkGcsLink
+from bridges.mavlink.gcs import MavlinkGcsLink
 from tests.e2e.conftest import BusTap, Proc, Rig, SetpointLoop, record_raw, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]

@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ftcap_hil.allocator import AllocationStatus, Allocator, AllocatorConfig
-from ftcap_hil.estimator import wrench_scale
-from ftcap_hil.geometry import ThrusterSet, command_bounds, effectiveness, paper_four_thrusters
-from ftcap_hil.qp import BoxQpSolution, available_backends
+from ftcap_hil.core.allocator import AllocationStatus, Allocator, AllocatorConfig
+from ftcap_hil.core.estimator import wrench_scale
+from ftcap_hil.core.geometry import ThrusterSet, command_bounds, effectiveness, paper_four_thrusters
+from ftcap_hil.core.qp import BoxQpSolution, available_backends
 from tests.unit.test_geometry import six_thrusters
 
 DT_S = 0.1

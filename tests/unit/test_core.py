@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ftcap_hil.allocator import AllocationStatus
-from ftcap_hil.core import CoreConfig, FtcapCore, Mode, Truth
-from ftcap_hil.geometry import command_bounds, effectiveness, paper_four_thrusters
+from ftcap_hil.core.allocator import AllocationStatus
+from ftcap_hil.core.cycle import CoreConfig, FtcapCore, Mode, Truth
+from ftcap_hil.core.geometry import command_bounds, effectiveness, paper_four_thrusters
 
 THS = paper_four_thrusters()
 B = effectiveness(THS)

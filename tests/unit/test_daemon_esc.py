@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 
-from ftcap_hil.core import CoreConfig
-from ftcap_hil.daemon import AllocatorDaemon, DaemonConfig, Ports
-from ftcap_hil.geometry import effectiveness, paper_four_thrusters
-from ftcap_hil.plants import SurfaceVessel
+from ftcap_hil.core.cycle import CoreConfig
+from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.runtime.daemon import AllocatorDaemon, DaemonConfig, Ports
 
 S = 1_000_000_000  # ns
 

@@ -7,13 +7,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ftcap_hil.estimator import (
+from ftcap_hil.core.estimator import (
     EstimatorConfig,
     LiteralEstimator,
     WindowedEstimator,
     wrench_scale,
 )
-from ftcap_hil.geometry import ThrusterSet, effectiveness, paper_four_thrusters
+from ftcap_hil.core.geometry import ThrusterSet, effectiveness, paper_four_thrusters
 from tests.unit.test_geometry import six_thrusters
 
 VESSELS = {"paper4": paper_four_thrusters, "six": six_thrusters}

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ftcap_hil.core import CoreConfig, FtcapCore, Mode, Truth
-from ftcap_hil.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.cycle import CoreConfig, FtcapCore, Mode, Truth
+from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 
 
 def _oracle() -> FtcapCore:

@@ -8,7 +8,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from ftcap_hil.geometry import (
+from ftcap_hil.core.geometry import (
     ConfigError,
     ThrusterSet,
     effectiveness,

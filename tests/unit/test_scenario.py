@@ -9,10 +9,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from ftcap_hil.core import Mode
-from ftcap_hil.geometry import ConfigError, effectiveness
-from ftcap_hil.plants import LinearPlant, SurfaceVessel
-from ftcap_hil.scenario import load_scenario, parse_scenario, shipped_scenarios
+from ftcap_hil.config.scenario import load_scenario, parse_scenario, shipped_scenarios
+from ftcap_hil.core.cycle import Mode
+from ftcap_hil.core.geometry import ConfigError, effectiveness
+from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 from tests.unit.test_geometry import EQ22_L03
 
 BASE = """

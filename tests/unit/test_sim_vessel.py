@@ -11,11 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ftcap_hil.core import Truth
-from ftcap_hil.geometry import ConfigError, effectiveness, paper_four_thrusters
-from ftcap_hil.messages import FaultInjection, FaultKind
-from ftcap_hil.plants import SurfaceVessel
-from ftcap_hil.scenario import FaultEvent, FaultSchedule
+from ftcap_hil.config.scenario import FaultEvent, FaultSchedule
+from ftcap_hil.core.cycle import Truth
+from ftcap_hil.core.geometry import ConfigError, effectiveness, paper_four_thrusters
+from ftcap_hil.core.messages import FaultInjection, FaultKind
+from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.runtime.vessel_process import MAX_CATCH_UP_STEPS, VesselProcess, load_config
 from sim.esc_model import DEFAULT_ESC, EscModel
 from sim.vessel import (
     Decimator,
@@ -25,7 +26,6 @@ from sim.vessel import (
     record_header,
     record_row,
 )
-from sim.vessel_cmd import MAX_CATCH_UP_STEPS, VesselProcess, load_config
 
 THS = paper_four_thrusters(rate_limit=0.318359)
 B = effectiveness(THS)
@@ -305,7 +305,9 @@ def test_missing_config_file(tmp_path: Path) -> None:
 def test_cli_module_imports_no_transport() -> None:
     """``ftcap-hil`` imports every subcommand module to build its parser: the sim's must not
     pull in the networking stacks (the bridges are imported when the process starts)."""
-    code = "import json, sys, sim.vessel_cmd; print(json.dumps(sorted(sys.modules)))"
+    code = (
+        "import json, sys, ftcap_hil.runtime.vessel_process; print(json.dumps(sorted(sys.modules)))"
+    )
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60
     )

@@ -6,11 +6,11 @@ import math
 
 import numpy as np
 
-from ftcap_hil.core import CoreConfig
-from ftcap_hil.daemon import AllocatorDaemon, DaemonConfig, Ports, VesselClock
-from ftcap_hil.geometry import effectiveness, paper_four_thrusters
-from ftcap_hil.messages import Odometry
-from ftcap_hil.plants import SurfaceVessel
+from ftcap_hil.core.cycle import CoreConfig
+from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.messages import Odometry
+from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.runtime.daemon import AllocatorDaemon, DaemonConfig, Ports, VesselClock
 from tests.unit.test_daemon_esc import NullSink
 
 MS = 1_000_000  # ns

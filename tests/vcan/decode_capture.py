@@ -3,7 +3,7 @@
 Everything protocol-specific comes from the ``dronecan`` package: ``Frame`` (tail byte),
 ``TransferManager`` (reassembly by CAN ID and transfer ID), ``Transfer.from_frames``
 (tail-bit checks, CRC of multi-frame transfers, DSDL deserialization) and the DSDL types;
-none of ``bridges.can_codec`` is used, so a bug there cannot hide in its own check.
+none of ``bridges.can_io.codec`` is used, so a bug there cannot hide in its own check.
 
     python decode_capture.py capture.log      # one line per transfer, then counts
 

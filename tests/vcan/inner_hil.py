@@ -137,7 +137,7 @@ def free_udp_port() -> int:
 
 
 def cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "ftcap_hil.cli", *args]
+    return [sys.executable, "-m", "ftcap_hil", *args]
 
 
 def sets(items: list[str]) -> list[str]:
@@ -164,7 +164,7 @@ class Capture:
             self._thread.start()
 
     def _hub_logger(self) -> None:
-        from bridges.can_bus import open_can_bus
+        from bridges.can_io.bus import open_can_bus
 
         with open_can_bus("canhub", self.channel) as bus, open(self.path, "w") as fh:
             while not self._stop.is_set():
@@ -236,11 +236,11 @@ class Injector(threading.Thread):
 def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
     import numpy as np
 
-    from bridges.mavlink_config import GCS_IDS, MavlinkEndpoint
-    from bridges.mavlink_gcs import MavlinkGcsLink
-    from bridges.mavlink_vessel import FAILURE_ENABLE_PARAM
-    from ftcap_hil.controllers import PoseController
-    from ftcap_hil.messages import FaultKind
+    from bridges.mavlink.config import GCS_IDS, MavlinkEndpoint
+    from bridges.mavlink.gcs import MavlinkGcsLink
+    from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM
+    from ftcap_hil.core.controllers import PoseController
+    from ftcap_hil.core.messages import FaultKind
 
     out: Path = opts.out
     gcs_port, vessel_port, alloc_port = free_udp_port(), free_udp_port(), free_udp_port()
@@ -251,7 +251,7 @@ def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
     try:
         channel = opts.channel
         if opts.bus == "canhub":
-            from bridges.can_hub import CanHub
+            from bridges.can_io.hub import CanHub
 
             hub = CanHub(port=0).start()
             channel = hub.channel
@@ -442,7 +442,7 @@ def run_idle(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
     try:
         channel = opts.channel
         if opts.bus == "canhub":
-            from bridges.can_hub import CanHub
+            from bridges.can_io.hub import CanHub
 
             hub = CanHub(port=0).start()
             channel = hub.channel

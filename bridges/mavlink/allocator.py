@@ -1,0 +1,278 @@
+"""Allocator-side MAVLink adapter: setpoints and telemetry in, thruster commands and status out.
+
+In (dispatch thread -> mailboxes; invalid input is counted in the mailbox and dropped):
+
+* ``ODOMETRY`` from the vessel (``telemetry_source`` ids) -> ``odometry: Mailbox[Odometry]``
+  (eta = [x, y, yaw(q)] in NED, nu = [vx, vy, yawspeed] in body FRD).
+* ``WRENCH_SETPOINT`` -> ``setpoint: Mailbox[WrenchSetpoint]``; a component beyond
+  ``wrench_limit`` counts as malformed.
+* ``MANUAL_CONTROL`` -> ``manual: Mailbox[WrenchSetpoint]``, tau = [x, y, r] / 1000 *
+  ``max_wrench``. x > 0 is surge ahead, y > 0 sway to starboard, r > 0 yaw to starboard
+  (clockwise from above): common.xml words r the other way round, but PX4, ArduPilot and
+  QGroundControl all use r > 0 for yaw right, so we follow them. An axis equal to INT16_MAX
+  ("invalid") contributes 0; any other value outside [-1000, 1000] drops the message.
+  Manual and automatic setpoints get separate mailboxes: the daemon decides who wins.
+* ``PARAM_*``: the parameter protocol on the table given to the constructor
+  (:mod:`bridges.mavlink.params`).
+
+Out (called from the loop thread; each returns False instead of raising on transport errors):
+
+* ``HEARTBEAT`` at 1 Hz from the dispatch thread (MAV_TYPE_ONBOARD_CONTROLLER,
+  MAV_AUTOPILOT_INVALID), status from :meth:`set_system_status`. It starts as
+  ``MAV_STATE_BOOT``: the link (and the parameter protocol) is up before the control loop
+  runs, and a ground station must not take the heartbeat alone for "allocating". The daemon
+  reports ``STANDBY`` (setpoint stale: zero thrust) or ``ACTIVE`` (allocating) from its
+  first cycle on.
+* :meth:`send_thruster_commands` -> ``ACTUATOR_OUTPUT_STATUS``: ``actuator[i]`` = u_i in N
+  (0-based vessel-file order), bit i of ``active`` set for i < n_thrusters, rest zero.
+* :meth:`send_status` -> ``FTCAP_STATUS`` (our dialect): tau demand / unallocated and the
+  per-thruster ``delta_hat`` and ``f_hat`` (N) of one cycle, plus :class:`StatusFlag` bits.
+* :meth:`send_statustext` -> ``STATUSTEXT``, for the daemon to call on transitions.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bridges.mavlink.codec import Severity, SystemStatus, odometry_from_message, padded
+from bridges.mavlink.config import (
+    VESSEL_IDS,
+    LinkConfigError,
+    MavlinkEndpoint,
+    default_allocator_endpoint,
+)
+from bridges.mavlink.link import MavlinkPort, PortOwner, Route
+from bridges.mavlink.params import ParamServer, ParamService, ParamSpec
+from ftcap_hil.core.messages import (
+    FloatArray,
+    Mailbox,
+    MalformedMessage,
+    Odometry,
+    ThrusterCommand,
+    WrenchSetpoint,
+)
+
+MAX_THRUSTERS = 16  # FTCAP_STATUS array length
+MANUAL_FULL_SCALE = 1000
+_INT16_MAX = 32767
+
+
+class StatusFlag(enum.IntFlag):
+    """FTCAP_STATUS_FLAGS of the dialect."""
+
+    NONE = 0
+    DEGRADED = 1
+    SETPOINT_STALE = 2
+    TELEMETRY_STALE = 4
+    FAULT_DETECTED = 8
+    SATURATED = 16
+    UNALLOCATED = 32
+
+
+@dataclass(frozen=True)
+class AllocatorStatus:
+    """One cycle's status as carried by FTCAP_STATUS (SI, body frame).
+
+    tau_demand, tau_unallocated: (3,) [X (N), Y (N), N (N*m)]; delta_hat: (m,) in [0, 1];
+    f_hat: (m,) in N; m <= 16.
+    """
+
+    tau_demand: FloatArray
+    tau_unallocated: FloatArray
+    delta_hat: FloatArray
+    f_hat: FloatArray
+    flags: StatusFlag = StatusFlag.NONE
+
+    @classmethod
+    def from_message(cls, msg: Any) -> AllocatorStatus:
+        n = int(msg.n_thrusters)
+        if n > MAX_THRUSTERS:
+            raise MalformedMessage(f"FTCAP_STATUS n_thrusters {n} > {MAX_THRUSTERS}")
+        return cls(
+            np.asarray(msg.tau_demand, dtype=np.float64),
+            np.asarray(msg.tau_unallocated, dtype=np.float64),
+            np.asarray(msg.delta_hat[:n], dtype=np.float64),
+            np.asarray(msg.f_hat[:n], dtype=np.float64),
+            StatusFlag(msg.flags & sum(StatusFlag)),
+        )
+
+
+def _positive_triple(key: str, value: object) -> tuple[float, float, float]:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise LinkConfigError(f"{key}: expected 3 positive numbers, got {value!r}") from e
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
+        raise LinkConfigError(f"{key}: expected 3 positive finite numbers, got {value!r}")
+    return float(arr[0]), float(arr[1]), float(arr[2])
+
+
+@dataclass(frozen=True)
+class AllocatorLinkConfig:
+    """Limits of the allocator link.
+
+    max_wrench: tau for a full MANUAL_CONTROL deflection [X (N), Y (N), N (N*m)].
+    wrench_limit: WRENCH_SETPOINT components beyond +-this are dropped as malformed
+        (default 10 x max_wrench: a sanity bound, not the vessel's capability, since the
+        allocator itself reports what it cannot meet).
+    telemetry_source: (system, component) ODOMETRY is accepted from; None accepts any.
+    """
+
+    n_thrusters: int
+    max_wrench: tuple[float, float, float]
+    wrench_limit: tuple[float, float, float] | None = None
+    telemetry_source: tuple[int, int] | None = VESSEL_IDS
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.n_thrusters, int) or not 1 <= self.n_thrusters <= MAX_THRUSTERS:
+            raise LinkConfigError(
+                f"n_thrusters: expected an integer in 1..{MAX_THRUSTERS}, got {self.n_thrusters!r}"
+            )
+        object.__setattr__(self, "max_wrench", _positive_triple("max_wrench", self.max_wrench))
+        limit: object = self.wrench_limit
+        if limit is None:
+            limit = [10.0 * w for w in self.max_wrench]
+        object.__setattr__(self, "wrench_limit", _positive_triple("wrench_limit", limit))
+
+
+def wrench_from_manual(msg: Any, max_wrench: Sequence[float]) -> WrenchSetpoint:
+    """MANUAL_CONTROL (x, y, r in +-1000; INT16_MAX = axis invalid = 0) -> scaled wrench."""
+    axes = []
+    for name in ("x", "y", "r"):
+        raw = int(getattr(msg, name))
+        if raw == _INT16_MAX:
+            raw = 0
+        if not -MANUAL_FULL_SCALE <= raw <= MANUAL_FULL_SCALE:
+            raise MalformedMessage(f"MANUAL_CONTROL {name}={raw} outside +-{MANUAL_FULL_SCALE}")
+        axes.append(raw / MANUAL_FULL_SCALE)
+    return WrenchSetpoint.checked(np.asarray(axes) * np.asarray(max_wrench))
+
+
+def wrench_from_setpoint(msg: Any, limit: Sequence[float]) -> WrenchSetpoint:
+    """WRENCH_SETPOINT -> WrenchSetpoint; non-finite or beyond +-limit raises MalformedMessage."""
+    setpoint = WrenchSetpoint.checked([msg.surge, msg.sway, msg.yaw])
+    if np.any(np.abs(setpoint.tau) > np.asarray(limit)):
+        raise MalformedMessage(f"WRENCH_SETPOINT {setpoint.tau.tolist()} beyond +-{list(limit)}")
+    return setpoint
+
+
+class MavlinkAllocatorLink(PortOwner):
+    """The allocator daemon's MAVLink port; see the module docstring.
+
+    Mailboxes: ``odometry``, ``setpoint``, ``manual``. Parameters: ``params`` (a
+    :class:`ParamServer` over ``param_specs``). Start-up errors raise ``LinkConfigError``.
+    """
+
+    def __init__(
+        self,
+        config: AllocatorLinkConfig,
+        endpoint: MavlinkEndpoint | None = None,
+        param_specs: Sequence[ParamSpec] = (),
+        *,
+        poll_s: float = 0.05,
+        heartbeat_period_s: float = 1.0,
+    ) -> None:
+        self.config = config
+        self.odometry: Mailbox[Odometry] = Mailbox("mavlink.odometry")
+        self.setpoint: Mailbox[WrenchSetpoint] = Mailbox("mavlink.wrench_setpoint")
+        self.manual: Mailbox[WrenchSetpoint] = Mailbox("mavlink.manual_control")
+        self.params = ParamServer(param_specs)
+        self._param_service = ParamService(self.params)
+        routes = {
+            "ODOMETRY": Route(self._on_odometry, self.odometry),
+            "WRENCH_SETPOINT": Route(self._on_wrench, self.setpoint),
+            "MANUAL_CONTROL": Route(self._on_manual, self.manual),
+            **self._param_service.routes(),
+        }
+        self._port = MavlinkPort(
+            endpoint or default_allocator_endpoint(),
+            role="allocator",
+            mav_type="MAV_TYPE_ONBOARD_CONTROLLER",
+            routes=routes,
+            status=SystemStatus.BOOT,
+            heartbeat_period_s=heartbeat_period_s,
+            poll_s=poll_s,
+        )
+        self._param_service.attach(self._port)
+        self._active_mask = (1 << config.n_thrusters) - 1
+
+    # --- dispatch thread ---
+
+    def _on_odometry(self, msg: Any, now_ns: int) -> None:
+        source = self.config.telemetry_source
+        if source is not None and (msg.get_srcSystem(), msg.get_srcComponent()) != source:
+            self._port.stats.ignored += 1
+            return
+        self.odometry.put(odometry_from_message(msg, self._port.dialect))
+
+    def _on_wrench(self, msg: Any, now_ns: int) -> None:
+        if not self._port.addressed_to_me(msg.target_system, msg.target_component):
+            self._port.stats.ignored += 1
+            return
+        assert self.config.wrench_limit is not None  # filled in by __post_init__
+        self.setpoint.put(wrench_from_setpoint(msg, self.config.wrench_limit))
+
+    def _on_manual(self, msg: Any, now_ns: int) -> None:
+        if not self._port.addressed_to_me(msg.target):
+            self._port.stats.ignored += 1
+            return
+        self.manual.put(wrench_from_manual(msg, self.config.max_wrench))
+
+    # --- loop thread ---
+
+    def send_thruster_commands(self, command: ThrusterCommand) -> bool:
+        """ACTUATOR_OUTPUT_STATUS with u (N) in actuator[0:m]."""
+        u = np.asarray(command.u, dtype=np.float64)
+        if u.shape != (self.config.n_thrusters,):
+            raise ValueError(f"thruster command: expected shape ({self.config.n_thrusters},)")
+        actuator = padded(u, 32, "actuator")
+        stamp = self._port.time_boot_us()
+        mask = self._active_mask
+        return self._port.send(lambda mav: mav.actuator_output_status_send(stamp, mask, actuator))
+
+    def send_status(self, status: AllocatorStatus) -> bool:
+        """FTCAP_STATUS for one cycle (the daemon decimates)."""
+        n = self.config.n_thrusters
+        if np.shape(status.delta_hat) != (n,) or np.shape(status.f_hat) != (n,):
+            raise ValueError(f"status: delta_hat and f_hat must have shape ({n},)")
+        fields = (
+            self._port.time_boot_ms(),
+            padded(status.tau_demand, 3, "tau_demand"),
+            padded(status.tau_unallocated, 3, "tau_unallocated"),
+            padded(status.delta_hat, MAX_THRUSTERS, "delta_hat"),
+            padded(status.f_hat, MAX_THRUSTERS, "f_hat"),
+            int(status.flags),
+            n,
+        )
+        return self._port.send(lambda mav: mav.ftcap_status_send(*fields))
+
+    def send_esc_status(
+        self,
+        rpm: Sequence[float],
+        current: Sequence[float],
+        age: Sequence[float],
+        failed: Sequence[bool],
+    ) -> bool:
+        """FTCAP_ESC_STATUS: per-thruster ESC telemetry (NaN = unknown, +inf age = never)."""
+        n = self.config.n_thrusters
+        mask = sum(1 << i for i, f in enumerate(failed) if f)
+        fields = (
+            self._port.time_boot_ms(),
+            padded(rpm, 16, "rpm"),
+            padded(current, 16, "current"),
+            padded(age, 16, "age"),
+            mask,
+            n,
+        )
+        return self._port.send(lambda mav: mav.ftcap_esc_status_send(*fields))
+
+    def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
+        return self._port.send_statustext(text, severity)
+
+    def set_system_status(self, status: SystemStatus) -> None:
+        self._port.set_system_status(status)

@@ -1,0 +1,343 @@
+"""MAVLink transport shared by the allocator, vessel and ground-station links (pymavlink).
+
+This is the only module that imports ``pymavlink.mavutil`` (the dialect generator in
+:mod:`bridges.mavlink.dialect` imports ``pymavlink.generator``). One :class:`MavlinkPort`
+wraps one pymavlink connection and one dispatch thread; the role adapters
+(:mod:`bridges.mavlink.allocator`, :mod:`bridges.mavlink.vessel`, :mod:`bridges.mavlink.gcs`)
+give it a table of handlers and only validate and drop values into mailboxes. The topology
+and ids are in :mod:`bridges.mavlink.config`.
+
+Protocol: MAVLink 2 only, with the ftcap dialect (common.xml + WRENCH_SETPOINT,
+FTCAP_STATUS) from :mod:`bridges.mavlink.dialect`, set explicitly on every connection rather
+than through mavutil's process-wide dialect. UDP is read one datagram at a time and the
+parser is reset between datagrams (a MAVLink frame never spans two).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import socket
+import struct
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Self
+
+os.environ.setdefault("MAVLINK20", "1")  # read by mavutil when it builds its default dialect
+
+from pymavlink import mavutil  # noqa: E402  (must follow the MAVLINK20 switch)
+
+from bridges.mavlink import dialect as mavlink_dialect  # noqa: E402
+from bridges.mavlink.codec import Severity, SystemStatus  # noqa: E402
+from bridges.mavlink.config import LinkConfigError, MavlinkEndpoint, parse_host_port  # noqa: E402
+from ftcap_hil.core.messages import Mailbox, MalformedMessage  # noqa: E402
+
+logger = logging.getLogger(__name__)
+
+Handler = Callable[[Any, int], None]
+"""Called on the dispatch thread with (message, receive stamp from time.monotonic_ns())."""
+
+_DECODE_ERRORS = (MalformedMessage, ValueError, TypeError, OverflowError, AttributeError)
+
+
+@dataclass
+class PortStats:
+    """Counters of one port; written by the dispatch thread (send_errors by any sender)."""
+
+    received: int = 0
+    bad_data: int = 0  # CRC errors, unknown ids, garbage bytes
+    malformed: int = 0  # decoded but invalid, for handlers without a mailbox
+    ignored: int = 0  # addressed to someone else or from an unexpected source
+    send_errors: int = 0
+    errors: int = 0  # unexpected exceptions in handlers (logged)
+
+
+@dataclass(frozen=True)
+class Route:
+    """A handler and the mailbox whose ``malformed`` counter its decode errors go to."""
+
+    handler: Handler
+    mailbox: Mailbox[Any] | None = None
+
+
+@dataclass
+class _Heartbeat:
+    mav_type: int
+    autopilot: int
+    period_s: float
+    status: SystemStatus = SystemStatus.STANDBY
+    next_ns: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+
+class MavlinkPort:
+    """One pymavlink connection, one dispatch thread, a send lock and a 1 Hz HEARTBEAT.
+
+    The thread starts in the constructor: build the handler table first. ``mav_type`` and
+    ``autopilot`` are MAV_TYPE_* / MAV_AUTOPILOT_* names for the HEARTBEAT. ``tick``
+    (optional) runs on the dispatch thread after every receive or poll timeout.
+    """
+
+    def __init__(
+        self,
+        endpoint: MavlinkEndpoint,
+        *,
+        role: str,
+        mav_type: str,
+        routes: Mapping[str, Route],
+        autopilot: str = "MAV_AUTOPILOT_INVALID",
+        status: SystemStatus = SystemStatus.STANDBY,
+        heartbeat_period_s: float = 1.0,
+        poll_s: float = 0.05,
+        tick: Callable[[int], None] | None = None,
+    ) -> None:
+        self.endpoint = endpoint
+        self.role = role
+        self.dialect = mavlink_dialect.load()
+        self.stats = PortStats()
+        self._routes = dict(routes)
+        self._poll_s = poll_s
+        self._tick = tick
+        self._t0_ns = time.monotonic_ns()
+        self._heartbeat = _Heartbeat(
+            getattr(self.dialect, mav_type),
+            getattr(self.dialect, autopilot),
+            heartbeat_period_s,
+            status,
+        )
+        self._send_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._closed = False
+        self._close_lock = threading.Lock()
+        self._conn = self._open(endpoint)
+        self._datagram = isinstance(self._conn, mavutil.mavudp)
+        self._thread = threading.Thread(target=self._run, name=f"mavlink-{role}", daemon=True)
+        self._thread.start()
+
+    def _open(self, endpoint: MavlinkEndpoint) -> Any:
+        try:
+            conn = mavutil.mavlink_connection(
+                endpoint.connection,
+                source_system=endpoint.system_id,
+                source_component=endpoint.component_id,
+            )
+        except (OSError, ValueError) as e:
+            raise LinkConfigError(f"connection: cannot open {endpoint.connection!r}: {e}") from e
+        # The dialect is set here, per connection, rather than through mavutil's global.
+        conn.mav = self.dialect.MAVLink(
+            conn, srcSystem=endpoint.system_id, srcComponent=endpoint.component_id
+        )
+        conn.mav.robust_parsing = True
+        conn.WIRE_PROTOCOL_VERSION = "2.0"
+        conn.first_byte = False  # never let mavutil switch protocol version behind our back
+        if endpoint.peers:
+            if not isinstance(getattr(conn, "clients", None), set):
+                conn.close()
+                raise LinkConfigError("peers: this pymavlink has no multi-client udpin")
+            for peer in endpoint.peers:
+                host, port = parse_host_port("peers", peer)
+                addr = (socket.gethostbyname(host), port)
+                conn.clients.add(addr)
+                conn.clients_last_alive[addr] = time.time()
+        return conn
+
+    # --- identity and time ---
+
+    @property
+    def system_id(self) -> int:
+        return self.endpoint.system_id
+
+    @property
+    def component_id(self) -> int:
+        return self.endpoint.component_id
+
+    def time_boot_ms(self) -> int:
+        return ((time.monotonic_ns() - self._t0_ns) // 1_000_000) & 0xFFFFFFFF
+
+    def time_boot_us(self) -> int:
+        return (time.monotonic_ns() - self._t0_ns) // 1_000
+
+    def addressed_to_me(self, target_system: int, target_component: int | None = None) -> bool:
+        """MAVLink addressing: 0 is broadcast; ``None`` when the message has no component."""
+        if target_system not in (0, self.system_id):
+            return False
+        return target_component is None or target_component in (0, self.component_id)
+
+    # --- sending (any thread) ---
+
+    def send(self, build: Callable[[Any], None]) -> bool:
+        """Call ``build(mav)`` (e.g. ``lambda mav: mav.heartbeat_send(...)``) under the lock.
+
+        Returns False, counted in ``stats.send_errors``, if the port is closed or the socket
+        refused the datagram; never raises for transport errors.
+        """
+        with self._send_lock:
+            if self._closed:
+                self.stats.send_errors += 1
+                return False
+            try:
+                build(self._conn.mav)
+            except (OSError, OverflowError, ValueError, struct.error) as e:
+                # OverflowError / struct.error: a value that does not fit the wire type
+                # (e.g. 1e39 into a float32 field): the message is not sent, the caller goes on.
+                self.stats.send_errors += 1
+                logger.debug("%s: send failed: %s", self.role, e)
+                return False
+        return True
+
+    def set_system_status(self, status: SystemStatus) -> None:
+        """Status reported from the next HEARTBEAT on; a change is announced at once (the
+        dispatch thread sends a HEARTBEAT within ``poll_s``) rather than up to a period late."""
+        status = SystemStatus(status)
+        with self._heartbeat.lock:
+            if status != self._heartbeat.status:
+                self._heartbeat.status = status
+                self._heartbeat.next_ns = 0
+
+    def send_heartbeat(self) -> bool:
+        hb = self._heartbeat
+        with hb.lock:
+            status = int(hb.status)
+        return self.send(lambda mav: mav.heartbeat_send(hb.mav_type, hb.autopilot, 0, 0, status))
+
+    def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
+        """STATUSTEXT; text longer than 50 characters is sent as MAVLink 2 chunks."""
+        raw = text.encode("ascii", errors="replace")
+        if len(raw) <= 50:
+            return self.send(lambda mav: mav.statustext_send(int(severity), raw))
+        chunk_id = (self.time_boot_us() & 0xFFFE) + 1  # non-zero marks a chunked text
+        # A chunk shorter than 50 characters ends the text; add an empty one if needed.
+        chunks = [raw[i : i + 50] for i in range(0, len(raw), 50)]
+        if len(chunks[-1]) == 50:
+            chunks.append(b"")
+        ok = True
+        for seq, chunk in enumerate(chunks):
+
+            def build(mav: Any, chunk: bytes = chunk, seq: int = seq) -> None:
+                mav.statustext_send(int(severity), chunk, chunk_id, seq)
+
+            ok = self.send(build) and ok
+        return ok
+
+    # --- dispatch thread ---
+
+    def _receive(self) -> list[Any]:
+        """Messages decoded from one datagram (UDP), or at most one message (streams)."""
+        if not self._datagram:
+            msg = self._conn.recv_msg()
+            return [] if msg is None else [msg]
+        data = self._conn.recv()
+        if not data:
+            return []
+        msgs = self._conn.mav.parse_buffer(data) or []
+        mav = self._conn.mav
+        if mav.buf_len() > 0:
+            # A MAVLink frame never spans datagrams: drop the incomplete tail, or a bogus
+            # length field in garbage would swallow the next, valid datagram.
+            self.stats.bad_data += 1
+            mav.buf, mav.buf_index = bytearray(), 0
+            mav.expected_length = self.dialect.HEADER_LEN_V1 + 2  # as in MAVLink.__init__
+        return msgs
+
+    def _run(self) -> None:
+        self._periodic(time.monotonic_ns())  # announce ourselves at once
+        while not self._stop.is_set():
+            try:
+                msgs = self._receive()
+            except OSError as e:
+                if self._stop.is_set():
+                    break
+                self.stats.errors += 1
+                logger.warning("%s: receive failed: %s", self.role, e)
+                self._stop.wait(self._poll_s)
+                continue
+            now_ns = time.monotonic_ns()
+            if not msgs:
+                self._conn.select(self._poll_s)
+            for msg in msgs:
+                self._dispatch(msg, now_ns)
+            self._periodic(now_ns)
+
+    def _periodic(self, now_ns: int) -> None:
+        hb = self._heartbeat
+        if now_ns >= hb.next_ns:
+            hb.next_ns = now_ns + int(hb.period_s * 1e9)
+            self.send_heartbeat()
+        if self._tick is not None:
+            self._tick(now_ns)
+
+    def _dispatch(self, msg: Any, now_ns: int) -> None:
+        mtype = msg.get_type()
+        if mtype == "BAD_DATA":
+            self.stats.bad_data += 1
+            return
+        self.stats.received += 1
+        if (msg.get_srcSystem(), msg.get_srcComponent()) == (self.system_id, self.component_id):
+            return  # our own traffic echoed back by a forwarder
+        route = self._routes.get(mtype)
+        if route is None:
+            return
+        try:
+            route.handler(msg, now_ns)
+        except _DECODE_ERRORS as e:
+            logger.debug("%s: dropped %s: %s", self.role, mtype, e)
+            if route.mailbox is not None:
+                route.mailbox.count_malformed()
+            else:
+                self.stats.malformed += 1
+        except Exception:  # the thread boundary: log, count, keep serving
+            self.stats.errors += 1
+            logger.exception("%s: handler for %s failed", self.role, mtype)
+
+    # --- lifecycle ---
+
+    @property
+    def is_alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def shutdown(self, timeout_s: float = 2.0) -> None:
+        """Stop the dispatch thread and close the connection. Idempotent."""
+        with self._close_lock:
+            if self._stop.is_set() and self._closed:
+                return
+            self._stop.set()
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout_s)
+        with self._send_lock:
+            if not self._closed:
+                self._closed = True
+                with contextlib.suppress(OSError):
+                    self._conn.close()
+
+    def __enter__(self) -> MavlinkPort:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.shutdown()
+
+
+class PortOwner:
+    """Lifecycle shared by the links that own one :class:`MavlinkPort` as ``self._port``:
+    statistics, liveness, idempotent shutdown and the context manager."""
+
+    _port: MavlinkPort
+
+    @property
+    def stats(self) -> PortStats:
+        return self._port.stats
+
+    @property
+    def is_alive(self) -> bool:
+        return self._port.is_alive
+
+    def shutdown(self) -> None:
+        self._port.shutdown()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.shutdown()

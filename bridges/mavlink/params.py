@@ -1,0 +1,223 @@
+"""A generic MAVLink parameter server: a table of parameters and the parameter protocol.
+
+:class:`ParamServer` is pure (no I/O): a table of :class:`ParamSpec`, thread-safe reads for
+the loop thread, and the rules that accept or refuse a new value. :class:`ParamService`
+answers the MAVLink parameter protocol on a :class:`~bridges.mavlink.link.MavlinkPort`:
+
+* ``PARAM_REQUEST_LIST`` -> one ``PARAM_VALUE`` per parameter, in table order;
+* ``PARAM_REQUEST_READ`` -> ``PARAM_VALUE`` by index, or by name when ``param_index == -1``;
+* ``PARAM_SET`` -> ``PARAM_VALUE`` with the new value, or, if refused, with the unchanged
+  value plus a ``STATUSTEXT`` (WARNING) that says why.
+
+Unknown names or indices get no answer (as the protocol says) and are counted in
+``PortStats.ignored``. Integer parameters travel as ``MAV_PARAM_TYPE_INT32`` with the value
+C-cast to float (the ArduPilot / MAVProxy convention, exact up to 2**24), not bytewise.
+Names are upper case, at most 16 characters (MAVLink's ``param_id``), as MAVProxy expects.
+
+Validators run on the dispatch thread: they must be quick and pure (check the value, return
+``None`` to accept or a short reason to refuse); the loop thread reads values with
+:meth:`ParamServer.get` and can watch :attr:`ParamServer.generation` for changes.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import re
+import threading
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from bridges.mavlink.codec import Severity
+from bridges.mavlink.config import LinkConfigError
+from bridges.mavlink.link import MavlinkPort, Route
+
+_NAME = re.compile(r"^[A-Z][A-Z0-9_]{0,15}$")
+_INT_LIMIT = 2.0**24  # integers above this are not exact as float32
+
+
+class ParamType(enum.Enum):
+    FLOAT = "float"
+    INT = "int"
+
+
+Validator = Callable[[float], str | None]
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: name (<= 16 chars, upper case), type, default and limits (inclusive)."""
+
+    name: str
+    default: float
+    kind: ParamType = ParamType.FLOAT
+    min: float = -math.inf
+    max: float = math.inf
+    settable_while_running: bool = True
+    validate: Validator | None = None
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class SetResult:
+    accepted: bool
+    value: float  # the value in force after the attempt
+    reason: str = ""
+
+
+class ParamServer:
+    """Thread-safe parameter table; see the module docstring for the rules."""
+
+    def __init__(self, specs: Sequence[ParamSpec]) -> None:
+        self._specs = tuple(specs)
+        self._index = {spec.name: i for i, spec in enumerate(self._specs)}
+        if len(self._index) != len(self._specs):
+            names = [s.name for s in self._specs]
+            dupes = sorted({n for n in names if names.count(n) > 1})
+            raise LinkConfigError(f"params: duplicate names {dupes}")
+        for spec in self._specs:
+            self._check_spec(spec)
+        self._values = [float(spec.default) for spec in self._specs]
+        self._lock = threading.Lock()
+        self._running = False
+        self.generation = 0  # bumped on every accepted change
+
+    @staticmethod
+    def _check_spec(spec: ParamSpec) -> None:
+        key = f"params.{spec.name}"
+        if not _NAME.match(spec.name):
+            raise LinkConfigError(f"{key}: name must be 1-16 chars of A-Z, 0-9, _ ({spec.name!r})")
+        if not spec.min <= spec.default <= spec.max:
+            raise LinkConfigError(f"{key}: default {spec.default} outside [{spec.min}, {spec.max}]")
+        if spec.kind is ParamType.INT:
+            if not float(spec.default).is_integer() or abs(spec.default) > _INT_LIMIT:
+                raise LinkConfigError(f"{key}: default {spec.default} is not an int32 in +-2**24")
+
+    @property
+    def specs(self) -> tuple[ParamSpec, ...]:
+        return self._specs
+
+    def __len__(self) -> int:
+        return len(self._specs)
+
+    def index_of(self, name: str) -> int | None:
+        return self._index.get(name)
+
+    def get(self, name: str) -> float:
+        """Current value; KeyError for an unknown name (a programming error)."""
+        with self._lock:
+            return self._values[self._index[name]]
+
+    def get_index(self, index: int) -> float:
+        with self._lock:
+            return self._values[index]
+
+    def values(self) -> dict[str, float]:
+        with self._lock:
+            return {spec.name: v for spec, v in zip(self._specs, self._values, strict=True)}
+
+    @property
+    def running(self) -> bool:
+        return self._running
+
+    def set_running(self, running: bool) -> None:
+        """While running, parameters with ``settable_while_running=False`` refuse sets."""
+        self._running = bool(running)
+
+    def _refusal(self, spec: ParamSpec, value: float) -> str | None:
+        if not math.isfinite(value):
+            return "value is not finite"
+        if spec.kind is ParamType.INT and (not value.is_integer() or abs(value) > _INT_LIMIT):
+            return f"{value:g} is not an integer within +-2**24"
+        if not spec.min <= value <= spec.max:
+            return f"{value:g} outside [{spec.min:g}, {spec.max:g}]"
+        if self._running and not spec.settable_while_running:
+            return "not settable while running"
+        if spec.validate is not None:
+            return spec.validate(value)
+        return None
+
+    def set(self, name: str, value: float) -> SetResult:
+        """Apply the rules and store ``value`` if accepted. KeyError for unknown names."""
+        index = self._index[name]
+        spec = self._specs[index]
+        value = float(value)
+        reason = self._refusal(spec, value)
+        with self._lock:
+            if reason is not None:
+                return SetResult(False, self._values[index], reason)
+            self._values[index] = value
+            self.generation += 1
+        return SetResult(True, value)
+
+
+class ParamService:
+    """Answers the parameter protocol for ``server`` on ``port``; see the module docstring."""
+
+    def __init__(self, server: ParamServer) -> None:
+        self.server = server
+        self._port: MavlinkPort | None = None
+
+    def routes(self) -> dict[str, Route]:
+        return {
+            "PARAM_REQUEST_LIST": Route(self._on_request_list),
+            "PARAM_REQUEST_READ": Route(self._on_request_read),
+            "PARAM_SET": Route(self._on_set),
+        }
+
+    def attach(self, port: MavlinkPort) -> None:
+        self._port = port
+
+    def _send_value(self, index: int) -> None:
+        port = self._port
+        if port is None:
+            return
+        spec = self.server.specs[index]
+        value = self.server.get_index(index)
+        ptype = (
+            port.dialect.MAV_PARAM_TYPE_INT32
+            if spec.kind is ParamType.INT
+            else port.dialect.MAV_PARAM_TYPE_REAL32
+        )
+        name = spec.name.encode("ascii")
+        count = len(self.server)
+        port.send(lambda mav: mav.param_value_send(name, value, ptype, count, index))
+
+    def _for_me(self, msg: Any) -> bool:
+        port = self._port
+        if port is None or not port.addressed_to_me(msg.target_system, msg.target_component):
+            if port is not None:
+                port.stats.ignored += 1
+            return False
+        return True
+
+    def _on_request_list(self, msg: Any, now_ns: int) -> None:
+        if self._for_me(msg):
+            for index in range(len(self.server)):
+                self._send_value(index)
+
+    def _on_request_read(self, msg: Any, now_ns: int) -> None:
+        if not self._for_me(msg):
+            return
+        index: int | None = msg.param_index
+        if index == -1:
+            index = self.server.index_of(msg.param_id)
+        if index is None or not 0 <= index < len(self.server):
+            assert self._port is not None
+            self._port.stats.ignored += 1
+            return
+        self._send_value(index)
+
+    def _on_set(self, msg: Any, now_ns: int) -> None:
+        if not self._for_me(msg):
+            return
+        assert self._port is not None
+        index = self.server.index_of(msg.param_id)
+        if index is None:
+            self._port.stats.ignored += 1
+            return
+        result = self.server.set(msg.param_id, msg.param_value)
+        if not result.accepted:
+            self._port.send_statustext(f"{msg.param_id} not set: {result.reason}", Severity.WARNING)
+        self._send_value(index)

@@ -1,0 +1,235 @@
+"""Vessel-side MAVLink adapter: odometry out, fault injection in.
+
+Out: ``ODOMETRY`` (:meth:`MavlinkVesselLink.send_odometry`, at the sim rate) and a 1 Hz
+``HEARTBEAT`` (MAV_TYPE_SURFACE_BOAT, MAV_AUTOPILOT_GENERIC).
+
+In: ``COMMAND_LONG`` ``MAV_CMD_INJECT_FAILURE`` -> ``faults`` (a queue, not a latest-value
+mailbox: two injections in a row must both arrive), answered with ``COMMAND_ACK``; other
+commands addressed to this component get ``MAV_RESULT_UNSUPPORTED``. The parameter protocol
+serves ``SYS_FAILURE_EN`` (int, 0/1, default 0, as in PX4) plus any extra parameters given.
+
+MAV_CMD_INJECT_FAILURE, as interpreted here:
+
+* param1 failure unit: only ``FAILURE_UNIT_SYSTEM_MOTOR`` (101); others -> UNSUPPORTED.
+* param3 instance: 0 = all thrusters (one FaultInjection per thruster), 1..m = thruster
+  instance - 1 (MAVLink instances are 1-based, :class:`FaultInjection.index` is 0-based);
+  anything else -> DENIED.
+* param4 value (our extension; MAVLink leaves it unused): NaN = the simulator's default.
+* param2 failure type -> FaultKind:
+
+  ======================= =========== ================================================
+  FAILURE_TYPE            FaultKind   param4 (value)
+  ======================= =========== ================================================
+  OK (0)                  OK          ignored (clears the fault)
+  OFF (1)                 OFF         ignored
+  STUCK (2)               STUCK       force held (N); NaN = last produced force
+  WRONG (4)               BIAS        additive force (N); NaN = default
+  SLOW (5)                WEAK        effectiveness delta in [0, 1], else DENIED
+  GARBAGE (3), DELAYED    --          UNSUPPORTED
+  (6), INTERMITTENT (7)
+  ======================= =========== ================================================
+
+Result order (as PX4): SYS_FAILURE_EN == 0 -> DENIED; unsupported unit or type ->
+UNSUPPORTED; bad instance or value -> DENIED; fault queue full -> TEMPORARILY_REJECTED;
+otherwise ACCEPTED.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import queue
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from bridges.mavlink.codec import Severity, SystemStatus, quaternion_from_yaw
+from bridges.mavlink.config import MavlinkEndpoint, default_vessel_endpoint
+from bridges.mavlink.link import MavlinkPort, PortOwner, Route
+from bridges.mavlink.params import ParamServer, ParamService, ParamSpec, ParamType
+from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry, Stamped
+
+MAV_CMD_INJECT_FAILURE = 420
+FAILURE_UNIT_SYSTEM_MOTOR = 101
+FAILURE_ENABLE_PARAM = "SYS_FAILURE_EN"
+
+
+class MavResult(enum.IntEnum):
+    """MAV_RESULT, as carried by COMMAND_ACK."""
+
+    ACCEPTED = 0
+    TEMPORARILY_REJECTED = 1
+    DENIED = 2
+    UNSUPPORTED = 3
+    FAILED = 4
+
+
+class FailureType(enum.IntEnum):
+    """FAILURE_TYPE of MAV_CMD_INJECT_FAILURE (param2)."""
+
+    OK = 0
+    OFF = 1
+    STUCK = 2
+    GARBAGE = 3
+    WRONG = 4
+    SLOW = 5
+    DELAYED = 6
+    INTERMITTENT = 7
+
+
+FAULT_KIND_OF: dict[FailureType, FaultKind] = {
+    FailureType.OK: FaultKind.OK,
+    FailureType.OFF: FaultKind.OFF,
+    FailureType.STUCK: FaultKind.STUCK,
+    FailureType.WRONG: FaultKind.BIAS,
+    FailureType.SLOW: FaultKind.WEAK,
+}
+FAILURE_TYPE_OF: dict[FaultKind, FailureType] = {k: t for t, k in FAULT_KIND_OF.items()}
+
+
+@dataclass(frozen=True)
+class InjectDecision:
+    result: MavResult
+    faults: tuple[FaultInjection, ...] = ()
+    reason: str = ""
+
+
+def decode_inject_failure(
+    unit: float, failure_type: float, instance: float, value: float, n_thrusters: int
+) -> InjectDecision:
+    """Map MAV_CMD_INJECT_FAILURE params 1-4 to FaultInjections (see the module table)."""
+    unit, failure_type, instance, value = (float(p) for p in (unit, failure_type, instance, value))
+    if unit != FAILURE_UNIT_SYSTEM_MOTOR:
+        return InjectDecision(MavResult.UNSUPPORTED, reason=f"failure unit {unit:g}")
+    try:
+        if not failure_type.is_integer():
+            raise ValueError(failure_type)
+        kind = FAULT_KIND_OF[FailureType(int(failure_type))]
+    except (ValueError, KeyError, OverflowError):
+        return InjectDecision(MavResult.UNSUPPORTED, reason=f"failure type {failure_type:g}")
+    if not (math.isfinite(instance) and instance.is_integer() and 0 <= instance <= n_thrusters):
+        return InjectDecision(
+            MavResult.DENIED, reason=f"instance {instance:g} not in 0..{n_thrusters}"
+        )
+    if kind is FaultKind.WEAK and not (math.isnan(value) or 0.0 <= value <= 1.0):
+        return InjectDecision(MavResult.DENIED, reason=f"delta {value:g} not in [0, 1]")
+    if math.isinf(value):
+        return InjectDecision(MavResult.DENIED, reason="value is infinite")
+    if kind in (FaultKind.OK, FaultKind.OFF):
+        value = math.nan
+    indices = range(n_thrusters) if instance == 0 else (int(instance) - 1,)
+    faults = tuple(FaultInjection(i, kind, value) for i in indices)
+    return InjectDecision(MavResult.ACCEPTED, faults)
+
+
+class MavlinkVesselLink(PortOwner):
+    """The simulated vessel's MAVLink port; see the module docstring.
+
+    ``faults``: queue of ``Stamped[FaultInjection]``, drained by the sim loop
+    (:meth:`drain_faults`). ``params``: SYS_FAILURE_EN plus ``extra_params``.
+    """
+
+    def __init__(
+        self,
+        n_thrusters: int,
+        endpoint: MavlinkEndpoint | None = None,
+        extra_params: Sequence[ParamSpec] = (),
+        *,
+        fault_queue_size: int = 64,
+        poll_s: float = 0.05,
+        heartbeat_period_s: float = 1.0,
+    ) -> None:
+        if not isinstance(n_thrusters, int) or n_thrusters < 1:
+            raise ValueError(f"n_thrusters: expected a positive integer, got {n_thrusters!r}")
+        self.n_thrusters = n_thrusters
+        self.faults: queue.Queue[Stamped[FaultInjection]] = queue.Queue(fault_queue_size)
+        enable = ParamSpec(
+            FAILURE_ENABLE_PARAM, 0, ParamType.INT, 0, 1, description="allow fault injection"
+        )
+        self.params = ParamServer([enable, *extra_params])
+        self._param_service = ParamService(self.params)
+        routes = {"COMMAND_LONG": Route(self._on_command), **self._param_service.routes()}
+        self._port = MavlinkPort(
+            endpoint or default_vessel_endpoint(),
+            role="vessel",
+            mav_type="MAV_TYPE_SURFACE_BOAT",
+            autopilot="MAV_AUTOPILOT_GENERIC",
+            status=SystemStatus.ACTIVE,
+            routes=routes,
+            heartbeat_period_s=heartbeat_period_s,
+            poll_s=poll_s,
+        )
+        self._param_service.attach(self._port)
+
+    @property
+    def fault_injection_enabled(self) -> bool:
+        return self.params.get(FAILURE_ENABLE_PARAM) == 1
+
+    # --- dispatch thread ---
+
+    def _on_command(self, msg: Any, now_ns: int) -> None:
+        port = self._port
+        if not port.addressed_to_me(msg.target_system, msg.target_component):
+            port.stats.ignored += 1
+            return
+        if msg.command != MAV_CMD_INJECT_FAILURE:
+            if msg.target_component == port.component_id:  # broadcasts are not ours to refuse
+                self._ack(msg, MavResult.UNSUPPORTED)
+            return
+        decision = self._decide(msg)
+        if decision.result is not MavResult.ACCEPTED:
+            port.send_statustext(f"fault injection refused: {decision.reason}", Severity.WARNING)
+        self._ack(msg, decision.result)
+
+    def _decide(self, msg: Any) -> InjectDecision:
+        if not self.fault_injection_enabled:
+            return InjectDecision(MavResult.DENIED, reason=f"{FAILURE_ENABLE_PARAM} is 0")
+        decision = decode_inject_failure(
+            msg.param1, msg.param2, msg.param3, msg.param4, self.n_thrusters
+        )
+        if decision.result is not MavResult.ACCEPTED:
+            return decision
+        if self.faults.maxsize - self.faults.qsize() < len(decision.faults):
+            return InjectDecision(MavResult.TEMPORARILY_REJECTED, reason="fault queue full")
+        for fault in decision.faults:  # only this thread puts: the room checked above stays
+            self.faults.put_nowait(Stamped(fault, time.monotonic_ns()))
+        return decision
+
+    def _ack(self, msg: Any, result: MavResult) -> None:
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        self._port.send(
+            lambda mav: mav.command_ack_send(msg.command, int(result), 0, 0, src[0], src[1])
+        )
+
+    # --- sim thread ---
+
+    def send_odometry(self, odometry: Odometry) -> bool:
+        """ODOMETRY: pose in MAV_FRAME_LOCAL_NED, twist in MAV_FRAME_BODY_FRD, 3-DOF.
+
+        time_usec is the sim time ``odometry.time_s`` (uptime of the link if NaN).
+        """
+        eta, nu = odometry.eta, odometry.nu
+        t_s = odometry.time_s
+        time_usec = int(t_s * 1e6) if math.isfinite(t_s) and t_s >= 0 else self._port.time_boot_us()
+        unknown = [math.nan] + [0.0] * 20  # covariance unknown: NaN first element
+        d = self._port.dialect
+        fields = (
+            time_usec, d.MAV_FRAME_LOCAL_NED, d.MAV_FRAME_BODY_FRD,
+            float(eta[0]), float(eta[1]), 0.0, quaternion_from_yaw(float(eta[2])),
+            float(nu[0]), float(nu[1]), 0.0, 0.0, 0.0, float(nu[2]),
+            unknown, unknown,
+        )  # fmt: skip
+        return self._port.send(lambda mav: mav.odometry_send(*fields))
+
+    def drain_faults(self) -> list[Stamped[FaultInjection]]:
+        """All queued fault injections, oldest first."""
+        out: list[Stamped[FaultInjection]] = []
+        while True:
+            try:
+                out.append(self.faults.get_nowait())
+            except queue.Empty:
+                return out
+
+    def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
+        return self._port.send_statustext(text, severity)

@@ -1,0 +1,175 @@
+"""Zenoh session settings for ftcap: role defaults, ``--cfg KEY:VALUE``, the safety check.
+
+Pure (no zenoh import): settings are ``{config key: JSON5 text}`` to be inserted with
+``zenoh.Config.insert_json5``, and the check reads a ``{config key: decoded JSON value}``
+mapping (what ``zenoh.Config.get_json`` returns). ``bridges.zenoh_io.link`` does the zenoh part.
+
+Network policy enforced by :func:`check_settings` (the start-up check of every session):
+
+* ``scouting/multicast/enabled`` must be explicitly ``false`` (zenoh's default is on);
+* no endpoint in the effective ``listen/endpoints`` may bind all interfaces
+  (``0.0.0.0``, ``[::]`` or an empty host): listen on ``127.0.0.1`` or a named interface address;
+* a router must listen somewhere, and a client must have a ``connect/endpoints`` entry,
+  since with scouting off nothing else would find the peer.
+
+Shipped files, ``ftcap_hil/data/zenoh/{allocator,vessel,gcs}.json5``, put the allocator in
+``router`` mode on ``tcp/127.0.0.1:7447`` and the vessel and ground station in ``client`` mode
+connecting to it.
+"""
+
+from __future__ import annotations
+
+import enum
+import ipaddress
+import json
+from collections.abc import Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+DEFAULT_PORT = 7447
+LOOPBACK = "127.0.0.1"
+SHIPPED_CONFIGS = ("allocator", "vessel", "gcs")
+CHECKED_KEYS = (
+    "mode",
+    "listen/endpoints",
+    "connect/endpoints",
+    "scouting/multicast/enabled",
+)
+
+
+class ZenohConfigError(ValueError):
+    """A Zenoh configuration that must not be used; the message names the key and value."""
+
+
+class ZenohRole(enum.Enum):
+    ROUTER = "router"  # the allocator daemon: listens
+    PEER = "peer"
+    CLIENT = "client"  # vessel, ground station: connect to the router
+
+
+def endpoint(host: str, port: int, protocol: str = "tcp") -> str:
+    """``tcp/127.0.0.1:7447``; an IPv6 literal is bracketed."""
+    if not 0 <= port <= 65535:
+        raise ZenohConfigError(f"port {port}: expected 0..65535")
+    if ":" in host and not host.startswith("["):
+        host = f"[{host}]"
+    return f"{protocol}/{host}:{port}"
+
+
+def role_settings(
+    role: ZenohRole | str, port: int = DEFAULT_PORT, host: str = LOOPBACK
+) -> dict[str, str]:
+    """Settings (key -> JSON5 text) for a session of ``role`` on ``host:port``.
+
+    A router listens on ``tcp/host:port``; a client or peer connects there and listens nowhere.
+    Gossip is off too: every session talks to the one router, so there is nothing to gossip.
+    """
+    role = _role(role, "role")
+    here = json.dumps([endpoint(host, port)])
+    settings = {
+        "mode": json.dumps(role.value),
+        "scouting/multicast/enabled": "false",
+        "scouting/gossip/enabled": "false",
+    }
+    if role is ZenohRole.ROUTER:
+        settings |= {"listen/endpoints": here, "connect/endpoints": "[]"}
+    else:
+        settings |= {"connect/endpoints": here, "listen/endpoints": "[]"}
+    return settings
+
+
+def parse_override(text: str) -> tuple[str, str]:
+    """Split one ``--cfg`` argument ``KEY:VALUE`` (VALUE is JSON5) at the first colon."""
+    key, sep, value = text.partition(":")
+    key = key.strip().strip("/")
+    if not sep or not key or not value.strip():
+        raise ZenohConfigError(
+            f"--cfg {text!r}: expected KEY:VALUE with a JSON5 value, "
+            "e.g. 'connect/endpoints:[\"tcp/127.0.0.1:7447\"]'"
+        )
+    return key, value.strip()
+
+
+def endpoint_host(locator: str) -> str | None:
+    """Host part of ``proto/host:port[?meta][#config]``; None for hostless (unix socket) ones."""
+    _, sep, address = locator.partition("/")
+    if not sep:
+        raise ZenohConfigError(f"endpoint {locator!r}: expected PROTOCOL/ADDRESS")
+    address = address.split("?", 1)[0].split("#", 1)[0]
+    if address.startswith("["):
+        return address[1 : address.find("]")] if "]" in address else None
+    if ":" not in address:
+        return None
+    return address.rsplit(":", 1)[0]
+
+
+def binds_all_interfaces(locator: str) -> bool:
+    host = endpoint_host(locator)
+    if host is None:
+        return False
+    if host == "":
+        return True
+    try:
+        return ipaddress.ip_address(host.split("%", 1)[0]).is_unspecified
+    except ValueError:  # a host name: resolved by zenoh, never the wildcard address
+        return False
+
+
+def check_settings(values: Mapping[str, Any], source: str = "zenoh config") -> ZenohRole:
+    """Refuse a configuration that breaks the network policy; return the session role.
+
+    ``values`` maps each key of :data:`CHECKED_KEYS` to its decoded JSON value (None = unset).
+    """
+    role = _role(values.get("mode") or ZenohRole.PEER.value, f"{source}: mode")
+    multicast = values.get("scouting/multicast/enabled")
+    if multicast is not False:
+        shown = "unset (zenoh's default is true)" if multicast is None else json.dumps(multicast)
+        raise ZenohConfigError(
+            f"{source}: scouting/multicast/enabled = {shown}; multicast scouting is forbidden "
+            "on this network, set it to false and use explicit endpoints"
+        )
+    listen_key, listen = _for_mode(values.get("listen/endpoints"), "listen/endpoints", role)
+    for locator in listen:
+        if binds_all_interfaces(locator):
+            raise ZenohConfigError(
+                f"{source}: {listen_key} contains {locator!r}, which listens on all interfaces; "
+                f"listen on {endpoint(LOOPBACK, DEFAULT_PORT)} or a specific address instead"
+            )
+    if role is ZenohRole.ROUTER and not listen:
+        raise ZenohConfigError(f"{source}: {listen_key} is empty; a router must listen")
+    connect_key, connect = _for_mode(values.get("connect/endpoints"), "connect/endpoints", role)
+    if role is ZenohRole.CLIENT and not connect:
+        raise ZenohConfigError(
+            f"{source}: {connect_key} is empty; with multicast scouting off a client needs "
+            "the router's endpoint"
+        )
+    return role
+
+
+def shipped_config_path(name: str) -> Path:
+    """Path of a shipped config: ``allocator``, ``vessel`` or ``gcs``."""
+    if name not in SHIPPED_CONFIGS:
+        raise ZenohConfigError(f"zenoh config {name!r}: expected one of {SHIPPED_CONFIGS}")
+    return Path(str(resources.files("ftcap_hil").joinpath("data", "zenoh", f"{name}.json5")))
+
+
+def _role(value: object, what: str) -> ZenohRole:
+    if isinstance(value, ZenohRole):
+        return value
+    try:
+        return ZenohRole(value)
+    except ValueError:
+        known = [r.value for r in ZenohRole]
+        raise ZenohConfigError(f"{what} = {value!r}: expected one of {known}") from None
+
+
+def _for_mode(value: object, key: str, role: ZenohRole) -> tuple[str, list[str]]:
+    """Endpoints effective for ``role``: a plain list, or the role's entry of a per-mode map."""
+    if isinstance(value, dict):
+        key, value = f"{key}/{role.value}", value.get(role.value)
+    if value is None:
+        return key, []
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ZenohConfigError(f"{key} = {value!r}: expected a list of endpoint strings")
+    return key, value

@@ -1,0 +1,345 @@
+"""Start the CAN hub, the simulated vessel, the allocator and the ground station on loopback,
+fly example 1 of the paper, print the results, stop everything.
+
+Each part is a separate process (``ftcap-hil can-hub``, ``ftcap-hil allocator``,
+``ftcap-hil sim``, ``ftcap-hil gcs``), all on 127.0.0.1 with free ports picked at start (UDP
+for MAVLink, TCP for the CAN hub and the Zenoh router), so a demo never collides with another
+setup on the default ports. Logs: DIR/logs/<name>.log; PIDs: DIR/logs/pids.json.
+
+Which mission: without ``--duration`` and ``--mission``, ``paper-4.2-ex1-short`` (example 1
+with the schedule compressed: faults at 12 s and 45 s, 140 s); with ``--duration S``, the
+paper's ``paper-4.2-ex1`` flown for S seconds (``--duration 700`` is the whole mission);
+``--mission`` picks any mission (shipped name or file). Why a compressed schedule and no
+speed-up: the vessel could run faster than real time (``sim.realtime_factor``), but the
+allocator's loop rate, estimation period, per-second rate limits and timeouts and the ground
+station's T_s and mission clock are all wall-clock and would all have to be scaled together;
+a compressed schedule keeps every timing as on the real vessel.
+
+Stopping: SIGTERM to each child still running, newest first, then SIGKILL after a grace
+period; also on Ctrl-C, on SIGTERM and when any child dies early. Exit code: 0 if every child
+ended cleanly and the ground station flew the mission, 1 otherwise, 130 if interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import logging
+import math
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+log = logging.getLogger("ftcap_hil.demo")
+
+LOCALHOST = "127.0.0.1"
+DEFAULT_MISSION = "paper-4.2-ex1-short"
+PAPER_MISSION = "paper-4.2-ex1"
+STOP_GRACE_S = 8.0
+HUB_READY = re.compile(r"can_hub listening on 127\.0\.0\.1:(\d+)")
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", type=Path, help="output folder (default: ftcap-runs/demo-<time>)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        help=f"fly {PAPER_MISSION} for this many seconds (700 = the paper's whole mission);"
+        f" default: {DEFAULT_MISSION} (140 s)",
+    )
+    p.add_argument("--mission", help="a mission file or shipped name (see `ftcap-hil gcs -h`)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+
+
+@dataclass
+class Child:
+    name: str
+    proc: subprocess.Popen[bytes]
+    log_path: Path
+    log_fh: IO[bytes]
+    killed: bool = False  # needed SIGKILL
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+
+@dataclass
+class Supervisor:
+    """Children started in order, stopped newest first; every stop is by PID."""
+
+    log_dir: Path
+    children: list[Child] = field(default_factory=list)
+
+    def start(self, name: str, argv: list[str]) -> Child:
+        path = self.log_dir / f"{name}.log"
+        fh = open(path, "wb")  # noqa: SIM115 - closed in stop_all
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        proc = subprocess.Popen(
+            argv,
+            stdin=subprocess.DEVNULL,
+            stdout=fh,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,  # Ctrl-C reaches the demo only; it stops the children
+        )
+        child = Child(name, proc, path, fh)
+        self.children.append(child)
+        log.info("started %s (pid %d): %s", name, proc.pid, " ".join(argv[1:]))
+        self._write_pids()
+        return child
+
+    def _write_pids(self) -> None:
+        pids = {c.name: c.pid for c in self.children}
+        tmp = self.log_dir / "pids.json.tmp"
+        tmp.write_text(json.dumps(pids, indent=2))
+        tmp.replace(self.log_dir / "pids.json")  # atomic: a reader never sees half a file
+
+    def died(self, exclude: Child | None = None) -> Child | None:
+        return next(
+            (c for c in self.children if c is not exclude and c.proc.poll() is not None), None
+        )
+
+    def stop(self, child: Child, grace_s: float = STOP_GRACE_S) -> None:
+        if child.proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(child.pid, signal.SIGTERM)
+            try:
+                child.proc.wait(grace_s)
+            except subprocess.TimeoutExpired:
+                log.warning(
+                    "%s (pid %d) ignored SIGTERM for %.0f s: SIGKILL",
+                    child.name,
+                    child.pid,
+                    grace_s,
+                )
+                child.killed = True
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(child.pid, signal.SIGKILL)
+                child.proc.wait()
+        child.log_fh.close()
+
+    def stop_all(self) -> None:
+        for child in reversed(self.children):
+            self.stop(child)
+
+    def failures(self) -> list[str]:
+        out = []
+        for c in self.children:
+            code = c.proc.returncode
+            if c.killed or code != 0:
+                how = "needed SIGKILL" if c.killed else f"exit code {code}"
+                out.append(f"{c.name} (pid {c.pid}): {how}, see {c.log_path}")
+        return out
+
+
+def free_ports(kind: int, n: int) -> list[int]:
+    """n distinct free ports on 127.0.0.1 (all held open together while picking)."""
+    socks = [socket.socket(socket.AF_INET, kind) for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind((LOCALHOST, 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+@dataclass(frozen=True)
+class Ports:
+    gcs: int
+    allocator: int
+    vessel: int
+    zenoh: int
+    can: int = 0  # known once the hub is up
+
+    @classmethod
+    def pick(cls) -> Ports:
+        gcs, allocator, vessel = free_ports(socket.SOCK_DGRAM, 3)
+        return cls(gcs, allocator, vessel, free_ports(socket.SOCK_STREAM, 1)[0])
+
+
+def _cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "ftcap_hil", *args]
+
+
+def allocator_argv(p: Ports) -> list[str]:
+    zenoh_listen = f"['listen/endpoints:[\"tcp/{LOCALHOST}:{p.zenoh}\"]']"
+    sets = [
+        f"can.channel={LOCALHOST}:{p.can}",
+        f"mavlink.connection=udpin:{LOCALHOST}:{p.allocator}",
+        f'mavlink.peers=["{LOCALHOST}:{p.gcs}"]',
+        f"zenoh.overrides={zenoh_listen}",
+    ]
+    return _cli("allocator", *[a for s in sets for a in ("--set", s)])
+
+
+def vessel_argv(p: Ports) -> list[str]:
+    sets = [
+        f"can.channel={LOCALHOST}:{p.can}",
+        f"mavlink.connection=udpin:{LOCALHOST}:{p.vessel}",
+        f'mavlink.peers=["{LOCALHOST}:{p.allocator}", "{LOCALHOST}:{p.gcs}"]',
+        f"zenoh.connect=tcp/{LOCALHOST}:{p.zenoh}",
+    ]
+    return _cli("sim", *[a for s in sets for a in ("--set", s)])
+
+
+def gcs_argv(p: Ports, mission: str, out: Path, duration: float | None, plots: bool) -> list[str]:
+    argv = _cli(
+        "gcs",
+        "--mission",
+        mission,
+        "--out",
+        str(out),
+        "--gcs-port",
+        str(p.gcs),
+        "--allocator-port",
+        str(p.allocator),
+        "--vessel-port",
+        str(p.vessel),
+    )
+    if duration is not None:
+        argv += ["--duration", repr(duration)]
+    return argv + ([] if plots else ["--no-plots"])
+
+
+def wait_for_hub(child: Child, stop: StopRequest, timeout_s: float = 15.0) -> int:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        stop.check()
+        if match := HUB_READY.search(child.log_path.read_text(errors="replace")):
+            return int(match.group(1))
+        if child.proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    raise RuntimeError(f"the CAN hub did not come up within {timeout_s:g} s, see {child.log_path}")
+
+
+class Interrupted(Exception):
+    pass
+
+
+class StopRequest:
+    """SIGINT / SIGTERM handler that only takes note, so that a signal can never land
+    between starting a child and recording it, nor cut the clean-up short; ``check``
+    raises Interrupted at the next safe point."""
+
+    def __init__(self) -> None:
+        self.signal_name: str | None = None
+
+    def __call__(self, signum: int, _frame: Any) -> None:
+        if self.signal_name is not None:
+            log.warning("%s: already stopping", signal.Signals(signum).name)
+        self.signal_name = signal.Signals(signum).name
+
+    def check(self) -> None:
+        if self.signal_name is not None:
+            raise Interrupted(self.signal_name)
+
+
+def supervise(
+    sup: Supervisor, gcs: Child, stop: StopRequest, budget_s: float, expected_s: float
+) -> None:
+    """Until the ground station ends; RuntimeError if another child dies first or the
+    ground station overruns ``budget_s``."""
+    started = time.monotonic()
+    tty = sys.stdout.isatty()
+    while gcs.proc.poll() is None:
+        stop.check()
+        if (dead := sup.died(exclude=gcs)) is not None:
+            raise RuntimeError(
+                f"{dead.name} (pid {dead.pid}) exited early with code "
+                f"{dead.proc.returncode}, see {dead.log_path}"
+            )
+        elapsed = time.monotonic() - started
+        if elapsed > budget_s:
+            raise RuntimeError(f"the ground station is still running after {elapsed:.0f} s")
+        if tty:
+            sys.stdout.write(f"\rdemo: {elapsed:5.0f} s of about {expected_s:.0f} s\x1b[K")
+            sys.stdout.flush()
+        time.sleep(0.2)
+    if tty:
+        sys.stdout.write("\r\x1b[K")
+
+
+def start_all(
+    sup: Supervisor, stop: StopRequest, args: argparse.Namespace, mission: str, out: Path
+) -> Child:
+    hub = sup.start("can_hub", [sys.executable, "-m", "ftcap_hil", "can-hub", "--port", "0"])
+    ports = Ports.pick()
+    ports = Ports(ports.gcs, ports.allocator, ports.vessel, ports.zenoh, wait_for_hub(hub, stop))
+    log.info("ports on %s: %s", LOCALHOST, ports)
+    sup.start("allocator", allocator_argv(ports))  # the Zenoh router: before its client
+    stop.check()
+    sup.start("vessel", vessel_argv(ports))
+    stop.check()
+    return sup.start("gcs", gcs_argv(ports, mission, out, args.duration, not args.no_plots))
+
+
+def expected_duration(mission: str, duration: float | None) -> float:
+    if duration is not None:
+        return duration
+    from ftcap_hil.config.mission import load_mission
+
+    return load_mission(mission).duration_s
+
+
+def print_summary(out: Path, wall_s: float) -> None:
+    from ftcap_hil.config.mission import summary_lines
+
+    path = out / "results.json"
+    if not path.exists():
+        print(f"demo: no {path} (see {out / 'logs' / 'gcs.log'})")
+        return
+    for line in summary_lines(json.loads(path.read_text())):
+        print(line)
+    plots = sorted(p.name for p in out.glob("*.png"))
+    print(f"results: {path}; timeseries: {', '.join(str(p) for p in out.glob('*/timeseries.csv'))}")
+    print(f"plots in {out}: {', '.join(plots) if plots else 'none'}")
+    print(f"logs: {out / 'logs'}; wall time {wall_s:.1f} s")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        print(f"ftcap-hil demo: --duration must be positive, got {args.duration}", file=sys.stderr)
+        return 2
+    mission = args.mission or (DEFAULT_MISSION if args.duration is None else PAPER_MISSION)
+    out = args.out or Path("ftcap-runs") / f"demo-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:
+        expected = expected_duration(mission, args.duration)
+    except ValueError as e:  # ConfigError is a ValueError
+        print(f"ftcap-hil demo: {e}", file=sys.stderr)
+        return 2
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    sup = Supervisor(out / "logs")
+    stop = StopRequest()
+    saved = {s: signal.signal(s, stop) for s in STOP_SIGNALS}
+    started, code = time.monotonic(), 0
+    try:
+        print(f"demo: flying {mission} for {expected:.0f} s; logs in {out / 'logs'}", flush=True)
+        gcs = start_all(sup, stop, args, mission, out)
+        supervise(sup, gcs, stop, budget_s=expected + 120.0, expected_s=expected)
+    except Interrupted as e:
+        log.error("interrupted (%s): stopping everything", e)
+        code = 130
+    except (RuntimeError, OSError) as e:
+        log.error("%s", e)
+        code = 1
+    finally:
+        sup.stop_all()
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+    for failure in sup.failures():
+        log.error("child failed: %s", failure)
+        code = code or 1
+    print_summary(out, time.monotonic() - started)
+    return code

@@ -1,0 +1,44 @@
+"""Nominal (fault-unaware) controllers of the paper: they produce the virtual input v."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ftcap_hil.core.messages import FloatArray
+from ftcap_hil.core.plants import wrap_angle
+
+
+@dataclass(frozen=True)
+class StateFeedback:
+    """Section 4.1: v = K x + K_r r, K_r = ((I - A - B_v K)^-1 B_v)^-1 (scalar plant)."""
+
+    gain: float = -0.6
+    a: float = 1.2
+    b_v: float = 1.0
+
+    @property
+    def k_r(self) -> float:
+        return 1.0 / (self.b_v / (1.0 - self.a - self.b_v * self.gain))
+
+    def __call__(self, x: FloatArray, ref: FloatArray) -> FloatArray:
+        return np.array([self.gain * x[0] + self.k_r * ref[0]])
+
+
+@dataclass(frozen=True)
+class PoseController:
+    """Eq. (24): v = K_p [R(psi)^T K_eta (eta_d - eta) - nu]; the heading error is wrapped
+    to (-pi, pi] so that a reference of pi and a heading of -pi are the same."""
+
+    kp: float = 0.75
+    k_eta: float = 0.63
+
+    def __call__(self, x: FloatArray, ref: FloatArray) -> FloatArray:
+        eta, nu = x[:3], x[3:6]
+        err = np.asarray(ref, dtype=np.float64) - eta
+        err[2] = float(wrap_angle(err[2]))
+        c, s = math.cos(eta[2]), math.sin(eta[2])
+        body = np.array([c * err[0] + s * err[1], -s * err[0] + c * err[1], err[2]])
+        return self.kp * (self.k_eta * body - nu)

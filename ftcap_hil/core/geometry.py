@@ -1,0 +1,224 @@
+"""Thruster geometry -> effectiveness matrix B, and the per-cycle command bounds.
+
+A thruster i at body position (x_i, y_i) (m; x forward, y starboard) pushing along the
+unit direction a_i = (cos alpha_i, sin alpha_i) with force u_i (N) produces the wrench
+
+    tau_i = u_i * [cos alpha_i,  sin alpha_i,  x_i sin alpha_i - y_i cos alpha_i]^T
+
+so B (3 x m) has those columns. Faults act as tau = B (Delta u + f), eq. (23) of the paper.
+
+The paper's eq. (22) is the special case alpha = pi/4 with four thrusters on a circle of
+radius l/2 (``paper_four_thrusters``); the paper never gives l, we default to 0.3 m.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ftcap_hil.core.messages import FloatArray
+
+
+class ConfigError(ValueError):
+    """A configuration value is wrong; the message names the key and the value."""
+
+
+@dataclass(frozen=True)
+class Thruster:
+    """One thruster: geometry and limits (SI).
+
+    ``rate_max`` is the largest change of command per second (N/s); ``step_max`` the largest
+    change per allocator cycle (N), the paper's form (eq. 2). At most one may be given; if
+    both are None the rate is unlimited.
+    """
+
+    name: str
+    x_m: float
+    y_m: float
+    angle_rad: float
+    u_min: float
+    u_max: float
+    rate_max: float | None = None
+    step_max: float | None = None
+
+    def column(self) -> FloatArray:
+        c, s = math.cos(self.angle_rad), math.sin(self.angle_rad)
+        return np.array([c, s, self.x_m * s - self.y_m * c])
+
+    def max_step(self, dt_s: float) -> float:
+        """Largest command change allowed in one cycle of length dt_s."""
+        if self.step_max is not None:
+            return self.step_max
+        if self.rate_max is not None:
+            return self.rate_max * dt_s
+        return math.inf
+
+
+@dataclass(frozen=True)
+class ThrusterSet:
+    thrusters: tuple[Thruster, ...]
+
+    @property
+    def m(self) -> int:
+        return len(self.thrusters)
+
+    @property
+    def names(self) -> list[str]:
+        return [t.name for t in self.thrusters]
+
+    @property
+    def u_min(self) -> FloatArray:
+        return np.array([t.u_min for t in self.thrusters])
+
+    @property
+    def u_max(self) -> FloatArray:
+        return np.array([t.u_max for t in self.thrusters])
+
+    def max_step(self, dt_s: float) -> FloatArray:
+        return np.array([t.max_step(dt_s) for t in self.thrusters])
+
+
+def effectiveness(thrusters: ThrusterSet) -> FloatArray:
+    """B (3 x m): columns [cos a, sin a, x sin a - y cos a] (N, N, N*m per N of thrust)."""
+    return np.column_stack([t.column() for t in thrusters.thrusters])
+
+
+def command_bounds(
+    u_min: FloatArray, u_max: FloatArray, max_step: FloatArray, u_prev: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Omega(u_prev) of eq. (2): amplitude limits intersected with the rate box.
+
+    If u_prev lies further than one step outside the amplitude range (limits just
+    tightened), the box collapses to the point one step towards the range, so the
+    command always moves back at the allowed rate and lo <= hi holds.
+    """
+    lo = np.maximum(u_min, u_prev - max_step)
+    hi = np.minimum(u_max, u_prev + max_step)
+    empty = lo > hi
+    if empty.any():
+        toward = np.clip(u_prev, u_min, u_max)
+        point = u_prev + np.clip(toward - u_prev, -max_step, max_step)
+        lo = np.where(empty, point, lo)
+        hi = np.where(empty, point, hi)
+    return lo, hi
+
+
+def paper_four_thrusters(
+    l_m: float = 0.3,
+    u_limit: float = 0.1,
+    step_limit: float | None = 0.09,
+    rate_limit: float | None = None,
+) -> ThrusterSet:
+    """The vessel of section 4.2: eq. (22) with alpha = pi/4.
+
+    Columns of eq. (22): (s, c, -l/2), (s, -c, l/2), (-s, c, l/2), (-s, -c, -l/2), with
+    s = sin alpha, c = cos alpha. Each is a thruster at distance l/2 from the centre whose line
+    of action passes l/2 from it; the corners (+-l/(2 sqrt 2), +-l/(2 sqrt 2)) realise them.
+    """
+    h = l_m / (2.0 * math.sqrt(2.0))
+    q = math.pi / 4.0
+    layout = [("T1", -h, h, q), ("T2", -h, -h, -q), ("T3", h, h, 3 * q), ("T4", h, -h, -3 * q)]
+    step = None if rate_limit is not None else step_limit
+    return ThrusterSet(
+        tuple(
+            Thruster(name, x, y, a, -u_limit, u_limit, rate_max=rate_limit, step_max=step)
+            for name, x, y, a in layout
+        )
+    )
+
+
+def _number(table: dict[str, Any], key: str, where: str) -> float:
+    if key not in table:
+        raise ConfigError(f"{where}.{key}: missing")
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ConfigError(f"{where}.{key}: expected a finite number, got {value!r}")
+    return float(value)
+
+
+def _optional(table: dict[str, Any], key: str, where: str) -> float | None:
+    return _number(table, key, where) if key in table else None
+
+
+def thruster_from_table(table: dict[str, Any], where: str) -> Thruster:
+    """One ``[[thruster]]`` entry: name, x, y, angle_deg (or direction = [dx, dy]),
+    u_min, u_max, and optionally rate_max (N/s) or step_max (N per cycle)."""
+    name = str(table.get("name", where))
+    if "direction" in table:
+        d = table["direction"]
+        if not (isinstance(d, Sequence) and len(d) == 2):
+            raise ConfigError(f"{where}.direction: expected [dx, dy], got {d!r}")
+        angle = math.atan2(float(d[1]), float(d[0]))
+        if math.hypot(float(d[0]), float(d[1])) == 0.0:
+            raise ConfigError(f"{where}.direction: zero vector")
+    else:
+        angle = math.radians(_number(table, "angle_deg", where))
+    thruster = Thruster(
+        name=name,
+        x_m=_number(table, "x", where),
+        y_m=_number(table, "y", where),
+        angle_rad=angle,
+        u_min=_number(table, "u_min", where),
+        u_max=_number(table, "u_max", where),
+        rate_max=_optional(table, "rate_max", where),
+        step_max=_optional(table, "step_max", where),
+    )
+    if not thruster.u_min <= 0.0 <= thruster.u_max or thruster.u_min == thruster.u_max:
+        raise ConfigError(
+            f"{where}: need u_min <= 0 <= u_max, got {thruster.u_min}, {thruster.u_max}"
+        )
+    if thruster.rate_max is not None and thruster.step_max is not None:
+        raise ConfigError(f"{where}: give rate_max or step_max, not both")
+    for key in ("rate_max", "step_max"):
+        value = getattr(thruster, key)
+        if value is not None and value <= 0.0:
+            raise ConfigError(f"{where}.{key}: must be > 0, got {value}")
+    return thruster
+
+
+def thrusters_from_table(table: dict[str, Any], where: str = "vessel") -> ThrusterSet:
+    """A vessel table: either ``preset = "paper-4.2"`` (with optional l, u_limit, and
+    step_limit (N per allocator cycle, the paper's form) or rate_limit (N/s))
+    or a list ``thruster = [{...}, ...]`` (TOML ``[[vessel.thruster]]``)."""
+    preset = table.get("preset")
+    if preset is not None:
+        if preset != "paper-4.2":
+            raise ConfigError(f"{where}.preset: unknown preset {preset!r} (known: 'paper-4.2')")
+        unknown = set(table) - {"preset", "l", "u_limit", "step_limit", "rate_limit"}
+        if unknown:
+            raise ConfigError(f"{where}: unknown keys {sorted(unknown)} for the paper-4.2 preset")
+        values = {"l": 0.3, "u_limit": 0.1, "step_limit": 0.09}
+        for key in ("l", "u_limit", "step_limit", "rate_limit"):
+            if key in table:
+                values[key] = _number(table, key, where)
+                if values[key] <= 0.0:
+                    raise ConfigError(f"{where}.{key}: must be > 0, got {values[key]}")
+        return paper_four_thrusters(
+            l_m=values["l"],
+            u_limit=values["u_limit"],
+            step_limit=values["step_limit"],
+            rate_limit=values.get("rate_limit"),
+        )
+    entries = table.get("thruster")
+    if not isinstance(entries, list) or not entries:
+        raise ConfigError(f"{where}.thruster: expected a non-empty list of thrusters")
+    thrusters = tuple(
+        thruster_from_table(t, f"{where}.thruster[{i}]") for i, t in enumerate(entries)
+    )
+    names = [t.name for t in thrusters]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"{where}.thruster: duplicate names in {names}")
+    return ThrusterSet(thrusters)
+
+
+def load_vessel(path: str | Path) -> ThrusterSet:
+    """Read a vessel TOML file (top-level table as in ``thrusters_from_table``)."""
+    with open(path, "rb") as fh:
+        data = tomllib.load(fh)
+    return thrusters_from_table(data.get("vessel", data), where=str(path))

@@ -1,0 +1,436 @@
+"""Run the simulated vessel: plant, ESCs on CAN, odometry out, fault injection in.
+
+Each step, on absolute wall-clock deadlines at ``sim.rate_hz``::
+
+    latest esc.RawCommand (CAN, with its age) -> fault injections (MAVLink
+    MAV_CMD_INJECT_FAILURE, Zenoh fault/inject) -> integrate one nominal step
+    (realtime_factor / rate_hz of sim time) per period since the last step -> ODOMETRY
+    (MAVLink) + telemetry/odometry (Zenoh) at telemetry_rate_hz -> esc.Status per ESC
+    (unless silent) at esc_status_rate_hz + ESC NodeStatus at 1 Hz
+
+A step that runs late integrates the time that really passed, in whole nominal steps (up to
+``MAX_CATCH_UP_STEPS``; a longer stall loses the excess, counted in ``lost_s``): the plant
+keeps real time as a boat does when its computer is busy, and sim time stays on the grid of
+nominal steps. One nominal step per late step instead slowed the plant down under load (a
+qemu TCG run: 185 overruns in 348 steps, sim time at 65 % of wall time) and weighted each
+step's command by sim time while the allocator weights it by wall time, a residual that the
+estimator read as a fault.
+
+Odometry carries the sim time in ``Odometry.time_s``. Configuration: the shipped
+``ftcap_hil/data/hil/vessel.toml`` (or ``--config``) plus ``--set SECTION.KEY=VALUE``.
+SIGINT/SIGTERM end the run cleanly (exit 0). ``--record FILE.csv`` writes one row per
+telemetry sample: true state, commands, produced forces and true faults.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import json
+import logging
+import math
+import signal
+import threading
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from ftcap_hil.config.daemon import apply_overrides, shipped_config
+from ftcap_hil.config.scenario import load_scenario, plant_from_tables
+from ftcap_hil.core.geometry import ConfigError, ThrusterSet
+from ftcap_hil.core.messages import (
+    BoolArray,
+    EscStatus,
+    FaultInjection,
+    Odometry,
+    Stamped,
+    ThrusterCommand,
+)
+from ftcap_hil.core.plants import SurfaceVessel
+from sim.vessel import (
+    Decimator,
+    ShellSettings,
+    SimSample,
+    VesselSim,
+    VesselSimConfig,
+    record_header,
+    record_row,
+    shell_settings_from,
+    sim_config_from,
+)
+
+log = logging.getLogger("sim.vessel")
+
+
+@dataclass(frozen=True)
+class VesselConfig:
+    shell: ShellSettings
+    sim: VesselSimConfig
+    raw: dict[str, Any]  # the merged TOML, for the bridge sections
+    source: str
+
+
+def load_config(
+    path: str | Path | None, overrides: list[str], scenario: str | None = None
+) -> VesselConfig:
+    """TOML file (shipped ``vessel.toml`` if None) + overrides; ConfigError names the key.
+
+    ``scenario`` (or ``sim.scenario``): a scenario file or shipped name whose [[fault]]
+    schedule gives the true faults by sim time; its plant and thrusters are not used.
+    """
+    src = Path(path) if path is not None else shipped_config("vessel.toml")
+    try:
+        data = apply_overrides(tomllib.loads(src.read_text()), overrides)
+    except FileNotFoundError:
+        raise ConfigError(f"config {str(src)!r}: no such file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{src}: {e}") from e
+    where = str(src)
+    plant, ths, B = plant_from_tables(data, where)
+    if not isinstance(plant, SurfaceVessel):
+        raise ConfigError(f"{where}.plant.kind: the simulator runs a vessel, got {plant!r}")
+    sim_table = data.get("sim", {})
+    scenario = scenario or sim_table.get("scenario")
+    schedule = None
+    if scenario is not None:
+        schedule = load_scenario(str(scenario)).faults
+        if schedule.m != ths.m:
+            raise ConfigError(f"scenario {scenario!r}: {schedule.m} thrusters, vessel has {ths.m}")
+    shell = shell_settings_from(sim_table, f"{where}.sim")
+    sim = sim_config_from(data, plant, ths, B, schedule, where)
+    return VesselConfig(shell, sim, data, where)
+
+
+class Recorder:
+    """``--record`` CSV: one row per telemetry sample, columns ``record_header``."""
+
+    def __init__(self, fh: IO[str], thrusters: ThrusterSet) -> None:
+        self._fh = fh
+        self._writer = csv.writer(fh)
+        self._writer.writerow(record_header(thrusters.names))
+
+    def write(self, sample: SimSample, monotonic_s: float) -> None:
+        self._writer.writerow(record_row(sample, monotonic_s))
+        self._fh.flush()
+
+
+class PortError(RuntimeError):
+    """A port could not be opened; the message names the config section."""
+
+
+class VesselPorts:
+    """CAN (commands in, ESC telemetry out), MAVLink and Zenoh (odometry out, faults in).
+
+    The bridges are imported here, lazily, so that building the ``ftcap-hil`` parser does not
+    import the networking stacks. ``shutdown()`` closes everything opened, in reverse.
+    """
+
+    def __init__(self, injection_enabled: bool) -> None:
+        self._stack = contextlib.ExitStack()
+        self._injection_enabled = injection_enabled
+        self.commands: Any = None  # Mailbox[ThrusterCommand] of the CanCommandSource
+        self.esc_sink: Any = None
+        self.mavlink: Any = None
+        self.zenoh: Any = None
+
+    @classmethod
+    def open(cls, raw: dict[str, Any], ths: ThrusterSet, injection_enabled: bool) -> VesselPorts:
+        ports = cls(injection_enabled)
+        try:
+            ports._open_can(raw.get("can", {}), ths)
+            ports._open_mavlink(raw.get("mavlink", {}), ths.m)
+            ports._open_zenoh(raw.get("zenoh", {}), ths.m)
+        except BaseException:
+            ports.shutdown()
+            raise
+        return ports
+
+    def _open_can(self, c: dict[str, Any], ths: ThrusterSet) -> None:
+        from bridges.can_io.adapters import CanCommandSource, CanEscStatusSink
+        from bridges.can_io.bus import CanBusError, open_can_bus
+        from bridges.can_io.force_map import ForceRawMap
+        from bridges.can_io.hub import CanHub, parse_channel
+
+        keys = {"interface", "channel", "allocator_node_id", "esc_node_ids", "start_hub"}
+        if unknown := set(c) - keys - {"deadband_n"}:
+            raise ConfigError(f"can: unknown keys {sorted(unknown)}")
+        interface = str(c.get("interface", "canhub"))
+        channel = str(c.get("channel", "127.0.0.1:29536"))
+        ids = c.get("esc_node_ids", [20 + i for i in range(ths.m)])
+        if not isinstance(ids, list) or len(ids) != ths.m:
+            raise ConfigError(f"can.esc_node_ids: expected {ths.m} node IDs, got {ids!r}")
+        start_hub = c.get("start_hub", False)
+        if start_hub not in (True, False) or (start_hub and interface != "canhub"):
+            raise ConfigError(f"can.start_hub: true needs interface 'canhub', got {start_hub!r}")
+        try:
+            if start_hub:
+                host, port = parse_channel(channel)
+                self._stack.callback(CanHub(host, port).start().shutdown)
+            bus = open_can_bus(interface, channel)
+            self._stack.callback(bus.shutdown)
+            force_map = ForceRawMap.from_limits(ths.u_min, ths.u_max, c.get("deadband_n", 0.0))
+            allocator = c.get("allocator_node_id", 10)
+            source = CanCommandSource(bus, force_map, allocator_node_id=allocator)
+            self._stack.callback(source.shutdown)
+            self.esc_sink = CanEscStatusSink(bus, ids)
+            self._stack.callback(self.esc_sink.shutdown)
+        except (CanBusError, OSError) as e:
+            raise PortError(f"can: {e}") from e
+        except (ValueError, TypeError) as e:
+            raise ConfigError(f"can: {e}") from e
+        self.commands = source.commands
+
+    def _open_mavlink(self, c: dict[str, Any], m: int) -> None:
+        if not _enabled(c, "mavlink"):
+            return
+        from bridges.mavlink.config import LinkConfigError, MavlinkEndpoint, default_vessel_endpoint
+        from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
+
+        values = {k: v for k, v in c.items() if k != "enabled"}
+        try:
+            endpoint = MavlinkEndpoint.from_mapping("mavlink", values, default_vessel_endpoint())
+            self.mavlink = MavlinkVesselLink(m, endpoint)
+        except LinkConfigError as e:
+            raise PortError(f"mavlink: {e}") from e
+        self._stack.callback(self.mavlink.shutdown)
+        self.mavlink.params.set(FAILURE_ENABLE_PARAM, int(self._injection_enabled))
+
+    def _open_zenoh(self, c: dict[str, Any], m: int) -> None:
+        if not _enabled(c, "zenoh"):
+            return
+        from bridges.zenoh_io.config import SHIPPED_CONFIGS, ZenohConfigError, shipped_config_path
+        from bridges.zenoh_io.link import ZenohLinkError, ZenohVesselLink, load_config
+
+        name = str(c.get("config", "vessel.json5"))  # a file, else a shipped config's name
+        path = Path(name)
+        if not path.exists() and name.removesuffix(".json5") in SHIPPED_CONFIGS:
+            path = shipped_config_path(name.removesuffix(".json5"))
+        overrides = c.get("overrides", [])  # as the allocator's [zenoh] table
+        if not isinstance(overrides, list):
+            raise ConfigError(f"zenoh.overrides: expected a list of 'KEY:VALUE', got {overrides!r}")
+        if "connect" in c:
+            connect = c["connect"] if isinstance(c["connect"], list) else [c["connect"]]
+            overrides = [f"connect/endpoints:{json.dumps(connect)}", *overrides]
+        try:
+            conf = load_config(path, [str(o) for o in overrides])
+            self.zenoh = ZenohVesselLink(str(c.get("vessel", "ftcap1")), conf, n_thrusters=m)
+        except (ZenohConfigError, ZenohLinkError, ValueError) as e:
+            raise PortError(f"zenoh: {e}") from e
+        self._stack.callback(self.zenoh.shutdown)
+
+    def latest_command(self) -> Stamped[ThrusterCommand] | None:
+        return None if self.commands is None else self.commands.latest()
+
+    def drain_faults(self) -> list[tuple[str, Stamped[FaultInjection]]]:
+        """Injections from every source, oldest first, as (source name, injection)."""
+        out = [("mavlink", f) for f in self.mavlink.drain_faults()] if self.mavlink else []
+        if self.zenoh is not None:
+            out += [("zenoh", f) for f in self.zenoh.faults.drain()]
+        return sorted(out, key=lambda item: item[1].stamp_ns)
+
+    def injection_enabled(self) -> bool:
+        """SYS_FAILURE_EN (live over MAVLink; the config value without MAVLink)."""
+        if self.mavlink is not None:
+            return bool(self.mavlink.fault_injection_enabled)
+        return self._injection_enabled
+
+    def send_odometry(self, odom: Odometry) -> None:
+        if self.mavlink is not None:
+            self.mavlink.send_odometry(odom)
+        if self.zenoh is not None:
+            self.zenoh.publish_odometry(odom)
+
+    def send_esc(self, statuses: list[EscStatus], reporting: BoolArray, now_ns: int) -> None:
+        if self.esc_sink is not None:
+            self.esc_sink.send_all(statuses)
+            self.esc_sink.tick(now_ns, np.flatnonzero(reporting).tolist())
+
+    def shutdown(self) -> None:
+        """Close every port opened, newest first. Idempotent."""
+        self._stack.close()
+
+
+def _enabled(table: dict[str, Any], section: str) -> bool:
+    enabled = table.get("enabled", True)
+    if not isinstance(enabled, bool):
+        raise ConfigError(f"{section}.enabled: expected true/false, got {enabled!r}")
+    return enabled
+
+
+MAX_CATCH_UP_STEPS = 5  # a late step integrates at most this many nominal steps
+
+
+class VesselProcess:
+    """startup -> steps on absolute deadlines -> shutdown (ports closed, handlers restored)."""
+
+    def __init__(
+        self,
+        cfg: VesselConfig,
+        ports: VesselPorts,
+        recorder: Recorder | None = None,
+        duration_s: float | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.sim = VesselSim(cfg.sim)
+        self.ports = ports
+        self.recorder = recorder
+        self.duration_s = duration_s
+        self.period_ns = int(1e9 / cfg.shell.rate_hz)
+        self.dt_s = cfg.shell.realtime_factor / cfg.shell.rate_hz
+        self.steps = 0
+        self.overruns = 0
+        self.lost_s = 0.0  # sim time not integrated: stalls longer than MAX_CATCH_UP_STEPS
+        self._last_step_ns: int | None = None
+        self.should_exit = False
+        self._wake = threading.Event()
+        self._telemetry = Decimator(cfg.shell.rate_hz, cfg.shell.telemetry_rate_hz)
+        self._esc = Decimator(cfg.shell.rate_hz, cfg.shell.esc_status_rate_hz)
+        self._command_stamp = -1
+        m = self.sim.m
+        self._shown: dict[str, Any] = {"fresh": False, "delta": np.ones(m), "f": np.zeros(m)}
+        self._shown["silent"] = np.zeros(m, dtype=bool)
+        self._saved: dict[int, Any] = {}
+
+    def request_exit(self, *_: object) -> None:
+        self.should_exit = True
+        self._wake.set()
+
+    def run(self) -> int:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._saved[sig] = signal.signal(sig, self.request_exit)
+        try:
+            deadline = time.monotonic_ns()
+            while not self.should_exit and not self._done():
+                self.step(time.monotonic_ns())
+                deadline += self.period_ns
+                late = time.monotonic_ns() - deadline
+                if late > 0:  # skip the deadlines this step ran past, keep the phase
+                    missed = late // self.period_ns + 1
+                    self.overruns += int(missed)
+                    deadline += int(missed) * self.period_ns
+                self._wake.wait((deadline - time.monotonic_ns()) * 1e-9)
+        finally:
+            for signum, handler in self._saved.items():
+                signal.signal(signum, handler)
+            self._saved.clear()
+        log.info(
+            "stopped at sim time %.2f s after %d steps (%d overruns, %.2f s lost to stalls)",
+            self.sim.t_s, self.steps, self.overruns, self.lost_s,
+        )  # fmt: skip
+        return 0
+
+    def _done(self) -> bool:
+        return self.duration_s is not None and self.sim.t_s >= self.duration_s - 1e-9
+
+    def step(self, now_ns: int) -> SimSample:
+        slot = self.ports.latest_command()
+        if slot is not None and slot.stamp_ns != self._command_stamp:
+            self._command_stamp = slot.stamp_ns
+            self.sim.set_command(slot.value.u, slot.stamp_ns * 1e-9)
+        for source, fault in self.ports.drain_faults():
+            self._inject(source, fault)
+        sample = self.sim.step(self._elapsed_s(now_ns), now_ns * 1e-9)
+        self.steps += 1
+        self._log_transitions(sample)
+        if self._telemetry.due():
+            odom = Odometry.checked(sample.x[:3], sample.x[3:], sample.t_s)
+            self.ports.send_odometry(odom)
+            if self.recorder is not None:
+                self.recorder.write(sample, now_ns * 1e-9)
+        if self._esc.due():
+            self.ports.send_esc(self.sim.esc_statuses(), ~sample.silent, now_ns)
+        return sample
+
+    def _elapsed_s(self, now_ns: int) -> float:
+        """Sim seconds for this step (module docstring): as many nominal steps as periods
+        passed since the last step, so that sim time stays on the grid of nominal steps (an
+        offline run at the same step reproduces it); one on the first step."""
+        last, self._last_step_ns = self._last_step_ns, now_ns
+        if last is None:
+            return self.dt_s
+        periods = max(1, round((now_ns - last) / self.period_ns))
+        if periods > MAX_CATCH_UP_STEPS:
+            self.lost_s += (periods - MAX_CATCH_UP_STEPS) * self.dt_s
+            periods = MAX_CATCH_UP_STEPS
+        return periods * self.dt_s
+
+    def _inject(self, source: str, fault: Stamped[FaultInjection]) -> None:
+        f = fault.value
+        names = self.cfg.sim.thrusters.names
+        what = f"thruster {names[f.index] if 0 <= f.index < self.sim.m else f.index} {f.kind.name}"
+        what += "" if math.isnan(f.value) else f" {f.value:g}"
+        if source != "mavlink" and not self.ports.injection_enabled():
+            log.warning("%s fault injection refused (SYS_FAILURE_EN is 0): %s", source, what)
+            return
+        try:
+            self.sim.inject(f)
+        except ValueError as e:
+            log.warning("%s fault injection refused: %s", source, e)
+            return
+        log.info("fault injected via %s: %s", source, what)
+
+    def _log_transitions(self, s: SimSample) -> None:
+        shown = self._shown
+        if s.command_fresh != shown["fresh"]:
+            shown["fresh"] = s.command_fresh
+            if s.command_fresh:
+                log.info("thruster commands received")
+            else:
+                log.warning("no thruster command for %.2f s: thrusters at zero", s.command_age_s)
+        names = self.cfg.sim.thrusters.names
+        for i in np.flatnonzero((s.delta != shown["delta"]) | (s.f != shown["f"])):
+            log.warning(
+                "t = %.2f s: thruster %s true fault delta %.2f -> %.2f, f %.4f -> %.4f N",
+                s.t_s, names[i], shown["delta"][i], s.delta[i], shown["f"][i], s.f[i],
+            )  # fmt: skip
+        for i in np.flatnonzero(s.silent != shown["silent"]):
+            log.warning("t = %.2f s: ESC %s %s", s.t_s, names[i],
+                        "silent" if s.silent[i] else "reporting again")  # fmt: skip
+        shown["delta"], shown["f"], shown["silent"] = s.delta, s.f, s.silent
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", type=Path, help="vessel TOML (default: the shipped vessel.toml)")
+    p.add_argument("--scenario", help="take the true faults from this scenario (file or name)")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="override a config value (TOML syntax), e.g. --set sim.silent_thrusters=[2]",
+    )
+    p.add_argument("--duration", type=float, help="stop after this many seconds of sim time")
+    p.add_argument("--record", type=Path, help="write the true state and faults to this CSV")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.duration is not None and not args.duration > 0:
+        log.error("--duration: expected a positive number of seconds, got %s", args.duration)
+        return 2
+    with contextlib.ExitStack() as stack:
+        try:
+            cfg = load_config(args.config, args.set, args.scenario)
+            ports = VesselPorts.open(cfg.raw, cfg.sim.thrusters, cfg.shell.fault_injection_enabled)
+        except ConfigError as e:
+            log.error("configuration error: %s", e)
+            return 2
+        except PortError as e:
+            log.error("%s", e)
+            return 1
+        stack.callback(ports.shutdown)
+        recorder = None
+        if args.record is not None:
+            try:
+                fh = stack.enter_context(open(args.record, "w", newline=""))
+            except OSError as e:
+                log.error("--record: cannot write %s: %s", args.record, e)
+                return 2
+            recorder = Recorder(fh, cfg.sim.thrusters)
+        log.info("simulated vessel running (%s), %d thrusters", cfg.source, cfg.sim.thrusters.m)
+        return VesselProcess(cfg, ports, recorder, args.duration).run()

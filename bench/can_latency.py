@@ -33,7 +33,7 @@ from bridges.can_io.adapters import CanCommandSource, CanThrusterSink
 from bridges.can_io.bus import open_can_bus
 from bridges.can_io.codec import decode_frames, encode_raw_command
 from bridges.can_io.force_map import ForceRawMap
-from ftcap_hil.core.messages import Mailbox
+from ftcap_hil.ports.mailbox import Mailbox
 
 WARMUP = 100
 

@@ -28,7 +28,8 @@ import numpy as np
 
 from bridges.can_io.codec import CanFrame, RawCommandMsg, decode_frames
 from bridges.can_io.hub_bus import CanHubBus
-from ftcap_hil.core.messages import MalformedMessage, WrenchSetpoint
+from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.messages import WrenchSetpoint
 
 EXTRA_SETS: list[str] = os.environ.get("FTCAP_BENCH_SET", "").split()  # more allocator --set
 

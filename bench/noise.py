@@ -17,8 +17,9 @@ import json
 
 import numpy as np
 
-from ftcap_hil.config.scenario import Scenario, load_scenario
-from ftcap_hil.core.cycle import Mode
+from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import phase_metrics
 from ftcap_hil.runtime.offline import run_mode
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 
 from ftcap_hil.config.scenario import load_scenario
-from ftcap_hil.core.cycle import Mode
+from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import results
 from ftcap_hil.runtime.offline import run_modes
 

@@ -48,7 +48,8 @@ from bridges.zenoh_io.link import (
     ZenohVesselLink,
     make_config,
 )
-from ftcap_hil.core.messages import Mailbox, ThrusterCommand, WrenchSetpoint
+from ftcap_hil.core.messages import ThrusterCommand, WrenchSetpoint
+from ftcap_hil.ports.mailbox import Mailbox
 
 VESSEL = "bench"
 WARMUP = 100

@@ -71,7 +71,8 @@ def allocator_cycling(config: str, vessel: str, gap_s: float = 0.6) -> tuple[boo
         return False, f"allocator: stuck at cycle {second.cycle}"
     return True, (
         f"allocator: mode {second.mode}, cycle {first.cycle} -> {second.cycle}, "
-        f"{second.overruns} overruns, degraded {second.degraded}, stale {dict(second.stale)}"
+        f"{second.overruns} overruns, degraded {second.degraded}, stale setpoint "
+        f"{second.setpoint_stale} telemetry {second.telemetry_stale}"
     )
 
 

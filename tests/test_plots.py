@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.scenario import load_scenario
-from ftcap_hil.core.cycle import Mode
+from ftcap_hil.core.status import Mode
 from ftcap_hil.report.plots import write_plots
 from ftcap_hil.runtime.offline import run_modes
 

@@ -44,7 +44,9 @@ from bridges.can_io.codec import (
 )
 from bridges.can_io.force_map import ForceRawMap
 from bridges.can_io.ports import CanReceiver, CanSender
-from ftcap_hil.core.messages import EscStatus, Mailbox, MalformedMessage, Stamped, ThrusterCommand
+from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.messages import EscStatus, ThrusterCommand
+from ftcap_hil.ports.mailbox import Mailbox, Stamped
 
 DEFAULT_ALLOCATOR_NODE_ID = 10
 

@@ -22,13 +22,14 @@ import can
 
 from bridges.can_io.hub_bus import INTERFACE_NAME as HUB_INTERFACE
 from bridges.can_io.hub_bus import CanHubBus
+from ftcap_hil.core.errors import PortError
 
 log = logging.getLogger(__name__)
 
 _FORBIDDEN = {"udp_multicast": "multicast is not allowed in ftcap-hil; use 'canhub' on loopback"}
 
 
-class CanBusError(RuntimeError):
+class CanBusError(PortError):
     """The configured CAN bus could not be opened (message names interface and channel)."""
 
 

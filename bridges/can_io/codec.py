@@ -36,7 +36,7 @@ import dronecan
 from dronecan.transport import Frame, Transfer, TransferError
 
 from bridges.can_io.force_map import MAX_THRUSTERS, RAW_MAX
-from ftcap_hil.core.messages import MalformedMessage
+from ftcap_hil.core.errors import MalformedMessage
 
 # libcanard's named priorities (0 = highest, 31 = lowest).
 PRIORITY_HIGH = 8

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from ftcap_hil.core.errors import FtcapError
+
 RAW_MAX = 8191
 #: DroneCAN ``uavcan.equipment.esc.RawCommand.cmd`` holds at most 20 elements.
 MAX_THRUSTERS = 20
@@ -37,7 +39,7 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 
-class NonFiniteCommand(ValueError):
+class NonFiniteCommand(FtcapError, ValueError):
     """A thruster force vector contained NaN or +-inf; nothing was sent."""
 
 

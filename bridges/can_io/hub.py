@@ -46,6 +46,8 @@ import threading
 from dataclasses import dataclass, field
 from types import TracebackType
 
+from ftcap_hil.core.errors import MalformedMessage
+
 log = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"
@@ -56,7 +58,7 @@ MAX_DATA = 64
 FLAG_EXTENDED, FLAG_REMOTE, FLAG_ERROR, FLAG_FD, FLAG_BRS, FLAG_ESI = 1, 2, 4, 8, 16, 32
 
 
-class HubProtocolError(ValueError):
+class HubProtocolError(MalformedMessage):
     """A peer sent bytes that are not a hub record."""
 
 

@@ -26,7 +26,7 @@ from bridges.can_io.codec import (
     TransferIds,
     encode,
 )
-from ftcap_hil.core.messages import MalformedMessage
+from ftcap_hil.core.errors import MalformedMessage
 
 log = logging.getLogger(__name__)
 

@@ -26,20 +26,29 @@ Out (called from the loop thread; each returns False instead of raising on trans
 * :meth:`send_thruster_commands` -> ``ACTUATOR_OUTPUT_STATUS``: ``actuator[i]`` = u_i in N
   (0-based vessel-file order), bit i of ``active`` set for i < n_thrusters, rest zero.
 * :meth:`send_status` -> ``FTCAP_STATUS`` (our dialect): tau demand / unallocated and the
-  per-thruster ``delta_hat`` and ``f_hat`` (N) of one cycle, plus :class:`StatusFlag` bits.
+  per-thruster ``delta_hat`` and ``f_hat`` (N) of one cycle, the :class:`StatusFlag` bits
+  and per-thruster faulty / saturated / probing masks (MAVLink 2 extension fields).
 * :meth:`send_statustext` -> ``STATUSTEXT``, for the daemon to call on transitions.
 """
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import zip_longest
 from typing import Any
 
 import numpy as np
 
-from bridges.mavlink.codec import Severity, SystemStatus, odometry_from_message, padded
+from bridges.mavlink.codec import (
+    MAX_THRUSTERS,
+    Severity,
+    SystemStatus,
+    bitmask,
+    odometry_from_message,
+    padded,
+    status_flags,
+)
 from bridges.mavlink.config import (
     VESSEL_IDS,
     LinkConfigError,
@@ -48,58 +57,13 @@ from bridges.mavlink.config import (
 )
 from bridges.mavlink.link import MavlinkPort, PortOwner, Route
 from bridges.mavlink.params import ParamServer, ParamService, ParamSpec
-from ftcap_hil.core.messages import (
-    FloatArray,
-    Mailbox,
-    MalformedMessage,
-    Odometry,
-    ThrusterCommand,
-    WrenchSetpoint,
-)
+from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.messages import Odometry, ThrusterCommand, WrenchSetpoint
+from ftcap_hil.core.status import AllocatorStatus
+from ftcap_hil.ports.mailbox import Mailbox
 
-MAX_THRUSTERS = 16  # FTCAP_STATUS array length
 MANUAL_FULL_SCALE = 1000
 _INT16_MAX = 32767
-
-
-class StatusFlag(enum.IntFlag):
-    """FTCAP_STATUS_FLAGS of the dialect."""
-
-    NONE = 0
-    DEGRADED = 1
-    SETPOINT_STALE = 2
-    TELEMETRY_STALE = 4
-    FAULT_DETECTED = 8
-    SATURATED = 16
-    UNALLOCATED = 32
-
-
-@dataclass(frozen=True)
-class AllocatorStatus:
-    """One cycle's status as carried by FTCAP_STATUS (SI, body frame).
-
-    tau_demand, tau_unallocated: (3,) [X (N), Y (N), N (N*m)]; delta_hat: (m,) in [0, 1];
-    f_hat: (m,) in N; m <= 16.
-    """
-
-    tau_demand: FloatArray
-    tau_unallocated: FloatArray
-    delta_hat: FloatArray
-    f_hat: FloatArray
-    flags: StatusFlag = StatusFlag.NONE
-
-    @classmethod
-    def from_message(cls, msg: Any) -> AllocatorStatus:
-        n = int(msg.n_thrusters)
-        if n > MAX_THRUSTERS:
-            raise MalformedMessage(f"FTCAP_STATUS n_thrusters {n} > {MAX_THRUSTERS}")
-        return cls(
-            np.asarray(msg.tau_demand, dtype=np.float64),
-            np.asarray(msg.tau_unallocated, dtype=np.float64),
-            np.asarray(msg.delta_hat[:n], dtype=np.float64),
-            np.asarray(msg.f_hat[:n], dtype=np.float64),
-            StatusFlag(msg.flags & sum(StatusFlag)),
-        )
 
 
 def _positive_triple(key: str, value: object) -> tuple[float, float, float]:
@@ -236,18 +200,21 @@ class MavlinkAllocatorLink(PortOwner):
         return self._port.send(lambda mav: mav.actuator_output_status_send(stamp, mask, actuator))
 
     def send_status(self, status: AllocatorStatus) -> bool:
-        """FTCAP_STATUS for one cycle (the daemon decimates)."""
+        """FTCAP_STATUS for one cycle (the daemon decimates); fields as in the dialect."""
         n = self.config.n_thrusters
-        if np.shape(status.delta_hat) != (n,) or np.shape(status.f_hat) != (n,):
-            raise ValueError(f"status: delta_hat and f_hat must have shape ({n},)")
+        if len(status.delta_hat) != n or len(status.f_hat) != n:
+            raise ValueError(f"status: delta_hat and f_hat must have {n} entries")
         fields = (
             self._port.time_boot_ms(),
-            padded(status.tau_demand, 3, "tau_demand"),
-            padded(status.tau_unallocated, 3, "tau_unallocated"),
+            padded(status.tau_demand or (0.0,) * 3, 3, "tau_demand"),
+            padded(status.unallocated or (0.0,) * 3, 3, "tau_unallocated"),
             padded(status.delta_hat, MAX_THRUSTERS, "delta_hat"),
             padded(status.f_hat, MAX_THRUSTERS, "f_hat"),
-            int(status.flags),
+            int(status_flags(status)),
             n,
+            bitmask(tuple(a or b for a, b in zip_longest(status.faulty, status.esc_failed))),
+            bitmask(status.saturated),
+            bitmask(status.probing),
         )
         return self._port.send(lambda mav: mav.ftcap_status_send(*fields))
 

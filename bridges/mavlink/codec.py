@@ -13,7 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.core.messages import MalformedMessage, Odometry
+from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.messages import Odometry
+from ftcap_hil.core.status import AllocatorStatus
 
 
 class Severity(enum.IntEnum):
@@ -81,3 +83,76 @@ def padded(values: Any, length: int, name: str) -> list[float]:
     if arr.shape[0] > length:
         raise ValueError(f"{name}: at most {length} values fit, got {arr.shape[0]}")
     return [*arr.tolist(), *([0.0] * (length - arr.shape[0]))]
+
+
+MAX_THRUSTERS = 16  # per-thruster arrays and bit masks of the dialect
+
+
+class StatusFlag(enum.IntFlag):
+    """FTCAP_STATUS_FLAGS of the dialect."""
+
+    NONE = 0
+    DEGRADED = 1
+    SETPOINT_STALE = 2
+    TELEMETRY_STALE = 4
+    FAULT_DETECTED = 8
+    SATURATED = 16
+    UNALLOCATED = 32
+
+
+def status_flags(st: AllocatorStatus) -> StatusFlag:
+    """The FTCAP_STATUS flag bits of a status."""
+    flags = StatusFlag.NONE
+    for on, flag in (
+        (st.degraded, StatusFlag.DEGRADED),
+        (st.setpoint_stale, StatusFlag.SETPOINT_STALE),
+        (st.telemetry_stale, StatusFlag.TELEMETRY_STALE),
+        (st.fault_detected, StatusFlag.FAULT_DETECTED),
+        (any(st.saturated), StatusFlag.SATURATED),
+        (st.has_unallocated, StatusFlag.UNALLOCATED),
+    ):
+        if on:
+            flags |= flag
+    return flags
+
+
+def bitmask(flags: tuple[bool, ...]) -> int:
+    """Bit i set where ``flags[i]`` is true."""
+    return sum(1 << i for i, f in enumerate(flags) if f)
+
+
+def _bits(mask: int, n: int) -> tuple[bool, ...]:
+    return tuple(bool(mask >> i & 1) for i in range(n))
+
+
+def status_from_message(msg: Any) -> AllocatorStatus:
+    """FTCAP_STATUS -> AllocatorStatus (fields it does not carry keep their defaults).
+
+    A sender without the extension fields (masks read as 0) gives per-thruster ``faulty``
+    from FAULT_DETECTED alone: every thruster is then marked when any is. Raises
+    MalformedMessage for n_thrusters > 16 or non-finite values.
+    """
+    n = int(msg.n_thrusters)
+    if n > MAX_THRUSTERS:
+        raise MalformedMessage(f"FTCAP_STATUS n_thrusters {n} > {MAX_THRUSTERS}")
+    arrays = [np.asarray(a, dtype=np.float64) for a in (msg.tau_demand, msg.tau_unallocated)]
+    arrays += [np.asarray(a[:n], dtype=np.float64) for a in (msg.delta_hat, msg.f_hat)]
+    if not all(np.all(np.isfinite(a)) for a in arrays):
+        raise MalformedMessage("FTCAP_STATUS: non-finite values")
+    flags = StatusFlag(int(msg.flags) & sum(StatusFlag))
+    faulty = _bits(int(getattr(msg, "faulty", 0)), n)
+    if StatusFlag.FAULT_DETECTED in flags and not any(faulty):
+        faulty = (True,) * n
+    tau, unallocated, delta_hat, f_hat = (tuple(a.tolist()) for a in arrays)
+    return AllocatorStatus(
+        degraded=StatusFlag.DEGRADED in flags,
+        setpoint_stale=StatusFlag.SETPOINT_STALE in flags,
+        telemetry_stale=StatusFlag.TELEMETRY_STALE in flags,
+        delta_hat=delta_hat,
+        f_hat=f_hat,
+        tau_demand=tau,
+        unallocated=unallocated,
+        saturated=_bits(int(getattr(msg, "saturated", 0)), n),
+        faulty=faulty,
+        probing=_bits(int(getattr(msg, "probing", 0)), n),
+    )

@@ -38,6 +38,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from ftcap_hil.core.errors import ConfigError
+
 LOCALHOST = "127.0.0.1"
 GCS_PORT = 14550
 VESSEL_PORT = 14560
@@ -47,7 +49,7 @@ ALLOCATOR_IDS = (1, 191)  # MAV_COMP_ID_ONBOARD_COMPUTER
 GCS_IDS = (255, 190)  # MAV_COMP_ID_MISSIONPLANNER
 
 
-class LinkConfigError(ValueError):
+class LinkConfigError(ConfigError):
     """A MAVLink endpoint is misconfigured (raised at start-up, names the key and value)."""
 
 

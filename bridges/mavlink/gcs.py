@@ -29,10 +29,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
-from bridges.mavlink.allocator import AllocatorStatus
-from bridges.mavlink.codec import Severity, SystemStatus, odometry_from_message
+from bridges.mavlink.codec import (
+    Severity,
+    SystemStatus,
+    odometry_from_message,
+    status_from_message,
+)
 from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint, default_gcs_endpoint
 from bridges.mavlink.link import MavlinkPort, PortOwner, Route
 from bridges.mavlink.vessel import (
@@ -41,15 +43,9 @@ from bridges.mavlink.vessel import (
     MAV_CMD_INJECT_FAILURE,
     MavResult,
 )
-from ftcap_hil.core.messages import (
-    FaultKind,
-    Mailbox,
-    MalformedMessage,
-    Odometry,
-    Stamped,
-    ThrusterCommand,
-    WrenchSetpoint,
-)
+from ftcap_hil.core.messages import FaultKind, Odometry, ThrusterCommand, WrenchSetpoint
+from ftcap_hil.core.status import AllocatorStatus
+from ftcap_hil.ports.mailbox import Mailbox, Stamped
 
 Ids = tuple[int, int]
 _MAV_PARAM_TYPE_REAL32 = 9
@@ -148,11 +144,7 @@ class MavlinkGcsLink(PortOwner):
 
     def _on_status(self, msg: Any, now_ns: int) -> None:
         if self._from(msg, self.allocator_ids):
-            status = AllocatorStatus.from_message(msg)
-            arrays = (status.tau_demand, status.tau_unallocated, status.delta_hat, status.f_hat)
-            if not all(np.all(np.isfinite(a)) for a in arrays):
-                raise MalformedMessage("FTCAP_STATUS: non-finite values")
-            self.allocator_status.put(status)
+            self.allocator_status.put(status_from_message(msg))
 
     def _on_esc(self, msg: Any, now_ns: int) -> None:
         if self._from(msg, self.allocator_ids):

@@ -33,7 +33,8 @@ from pymavlink import mavutil  # noqa: E402  (must follow the MAVLINK20 switch)
 from bridges.mavlink import dialect as mavlink_dialect  # noqa: E402
 from bridges.mavlink.codec import Severity, SystemStatus  # noqa: E402
 from bridges.mavlink.config import LinkConfigError, MavlinkEndpoint, parse_host_port  # noqa: E402
-from ftcap_hil.core.messages import Mailbox, MalformedMessage  # noqa: E402
+from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.ports.mailbox import Mailbox
 
 logger = logging.getLogger(__name__)
 

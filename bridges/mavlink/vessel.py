@@ -38,8 +38,6 @@ from __future__ import annotations
 
 import enum
 import math
-import queue
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -48,7 +46,8 @@ from bridges.mavlink.codec import Severity, SystemStatus, quaternion_from_yaw
 from bridges.mavlink.config import MavlinkEndpoint, default_vessel_endpoint
 from bridges.mavlink.link import MavlinkPort, PortOwner, Route
 from bridges.mavlink.params import ParamServer, ParamService, ParamSpec, ParamType
-from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry, Stamped
+from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry
+from ftcap_hil.ports.mailbox import EventQueue, Stamped
 
 MAV_CMD_INJECT_FAILURE = 420
 FAILURE_UNIT_SYSTEM_MOTOR = 101
@@ -143,7 +142,7 @@ class MavlinkVesselLink(PortOwner):
         if not isinstance(n_thrusters, int) or n_thrusters < 1:
             raise ValueError(f"n_thrusters: expected a positive integer, got {n_thrusters!r}")
         self.n_thrusters = n_thrusters
-        self.faults: queue.Queue[Stamped[FaultInjection]] = queue.Queue(fault_queue_size)
+        self.faults: EventQueue[FaultInjection] = EventQueue("mavlink.fault", fault_queue_size)
         enable = ParamSpec(
             FAILURE_ENABLE_PARAM, 0, ParamType.INT, 0, 1, description="allow fault injection"
         )
@@ -190,10 +189,10 @@ class MavlinkVesselLink(PortOwner):
         )
         if decision.result is not MavResult.ACCEPTED:
             return decision
-        if self.faults.maxsize - self.faults.qsize() < len(decision.faults):
+        if self.faults.room() < len(decision.faults):
             return InjectDecision(MavResult.TEMPORARILY_REJECTED, reason="fault queue full")
         for fault in decision.faults:  # only this thread puts: the room checked above stays
-            self.faults.put_nowait(Stamped(fault, time.monotonic_ns()))
+            self.faults.put(fault)
         return decision
 
     def _ack(self, msg: Any, result: MavResult) -> None:
@@ -224,12 +223,7 @@ class MavlinkVesselLink(PortOwner):
 
     def drain_faults(self) -> list[Stamped[FaultInjection]]:
         """All queued fault injections, oldest first."""
-        out: list[Stamped[FaultInjection]] = []
-        while True:
-            try:
-                out.append(self.faults.get_nowait())
-            except queue.Empty:
-                return out
+        return self.faults.drain()
 
     def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
         return self._port.send_statustext(text, severity)

@@ -43,25 +43,25 @@ Example setpoint: ``{"v":1,"X_N":1200.0,"Y_N":0.0,"N_Nm":-350.0}``.
 
 from __future__ import annotations
 
-import enum
 import json
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import (
     FaultInjection,
     FaultKind,
     FloatArray,
-    MalformedMessage,
     Odometry,
     ThrusterCommand,
     WrenchSetpoint,
 )
+from ftcap_hil.core.status import AllocatorStatus, Mode
 
 VERSION = 1
 MAX_PAYLOAD_BYTES = 65536
@@ -99,36 +99,6 @@ class ZenohKeys:
             state=f"{base}/allocator/state",
             fault_inject=f"{base}/fault/inject",
         )
-
-
-@dataclass(frozen=True)
-class AllocatorStatus:
-    """What the allocator reports on ``allocator/status`` and answers on ``allocator/state``.
-
-    ``m`` is the number of thrusters. delta_hat (m,) effectiveness estimates (1 = healthy);
-    f_hat (m,) estimated bias forces (N); bf_hat (3,) = B @ f_hat as a wrench; u (m,) last
-    commands (N); tau_unallocated (3,) demanded minus achieved wrench; saturated (m,) flags;
-    port_age_s: seconds since each input port last received (+inf = never); stale: per port.
-    ``mode`` is the daemon's mode name (an Enum is encoded by its ``value``).
-    """
-
-    mode: str | enum.Enum
-    cycle: int
-    overruns: int
-    degraded: bool
-    delta_hat: FloatArray
-    f_hat: FloatArray
-    bf_hat: FloatArray
-    u: FloatArray
-    tau_unallocated: FloatArray
-    saturated: tuple[bool, ...]
-    port_age_s: Mapping[str, float] = field(default_factory=dict)
-    stale: Mapping[str, bool] = field(default_factory=dict)
-
-    @classmethod
-    def from_mapping(cls, values: Mapping[str, Any]) -> AllocatorStatus:
-        """Build from a plain dict with the field names above (TypeError on unknown keys)."""
-        return cls(**values)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -306,58 +276,120 @@ def decode_fault_injection(payload: bytes | str, m: int | None = None) -> FaultI
 # --------------------------------------------------------------------------- status
 
 
-def encode_status(status: AllocatorStatus | Mapping[str, Any]) -> bytes:
+def encode_status(status: AllocatorStatus) -> bytes:
     """Encode a status; raise MalformedMessage for mismatched lengths or non-finite values."""
-    s = status if isinstance(status, AllocatorStatus) else AllocatorStatus.from_mapping(status)
+    s = status
     delta_hat = _finite_list("delta_hat", s.delta_hat)
     m = len(delta_hat)
-    saturated = [bool(flag) for flag in s.saturated]
-    if len(saturated) != m:
-        raise MalformedMessage(f"saturated: expected {m} flags, got {len(saturated)}")
-    ages = {str(k): (None if math.isinf(v) else float(v)) for k, v in s.port_age_s.items()}
+    flags = {name: _flags(name, getattr(s, name), m) for name in _FLAG_FIELDS}
+    if any(len(v) not in (0, m) for v in (s.esc_rpm, s.esc_current_a, s.esc_age_s)):
+        raise MalformedMessage(f"esc telemetry: expected {m} entries per field")
+    ages = {"setpoint": s.setpoint_age_s, "telemetry": s.telemetry_age_s}
+    ages |= {f"esc{i + 1}": a for i, a in enumerate(s.esc_age_s)}
     body = {
-        "mode": str(s.mode.value if isinstance(s.mode, enum.Enum) else s.mode),
+        "mode": None if s.mode is None else s.mode.value,
         "cycle": int(s.cycle),
         "overruns": int(s.overruns),
         "degraded": bool(s.degraded),
+        "estimation_frozen": bool(s.estimation_frozen),
         "delta_hat": delta_hat,
         "f_hat_N": _finite_list("f_hat", s.f_hat, m),
         "bf_hat": _wrench_obj("bf_hat", s.bf_hat),
         "u_N": _finite_list("u", s.u, m),
-        "tau_unallocated": _wrench_obj("tau_unallocated", s.tau_unallocated),
-        "saturated": saturated,
-        "port_age_s": ages,
-        "stale": {str(k): bool(v) for k, v in s.stale.items()},
+        "tau_demand": _wrench_obj("tau_demand", s.tau_demand or (0.0,) * 3),
+        "tau_unallocated": _wrench_obj("tau_unallocated", s.unallocated),
+        **flags,
+        "port_age_s": {k: (None if math.isinf(v) else float(v)) for k, v in ages.items()},
+        "stale": {"setpoint": bool(s.setpoint_stale), "telemetry": bool(s.telemetry_stale)},
+        "malformed": int(s.malformed),
+        "esc_rpm": [_optional_float(float(v)) for v in s.esc_rpm],
+        "esc_current_A": [_optional_float(float(v)) for v in s.esc_current_a],
     }
     return _dump({"v": VERSION, **body})
 
 
+_FLAG_FIELDS = ("saturated", "faulty", "esc_failed", "probing")
+
+
+def _flags(name: str, value: tuple[bool, ...], m: int) -> list[bool]:
+    flags = [bool(f) for f in value]
+    if len(flags) not in ((m,) if name == "saturated" else (0, m)):
+        raise MalformedMessage(f"{name}: expected {m} flags, got {len(flags)}")
+    return flags
+
+
 def decode_status(payload: bytes | str) -> AllocatorStatus:
+    """The status of a payload; fields added after v1 are optional (their defaults)."""
     obj = _load(payload)
-    mode = _get(obj, "mode")
-    if not isinstance(mode, str):
-        raise MalformedMessage(f"mode: expected a string, got {mode!r}")
     delta_hat = _vector(obj, "delta_hat")
     m = delta_hat.shape[0]
-    saturated = _get(obj, "saturated")
-    if not isinstance(saturated, list) or len(saturated) != m:
-        raise MalformedMessage(f"saturated: expected a list of {m} flags, got {saturated!r:.80}")
-    if not all(isinstance(x, bool) for x in saturated):
-        raise MalformedMessage(f"saturated: expected true/false flags, got {saturated!r:.80}")
+    ages = _port_ages(_get(obj, "port_age_s"))
+    stale = _port_flags(_get(obj, "stale"))
+    flags: dict[str, Any] = {
+        name: _flag_list(obj, name, m)
+        for name in _FLAG_FIELDS
+        if name == "saturated" or name in obj
+    }
+    esc: dict[str, Any] = {
+        attr: tuple(_optional_vector(obj, key, m))
+        for attr, key in (("esc_rpm", "esc_rpm"), ("esc_current_a", "esc_current_A"))
+        if key in obj
+    }
+    esc_ages = tuple(ages[f"esc{i + 1}"] for i in range(m) if f"esc{i + 1}" in ages)
     return AllocatorStatus(
-        mode=mode,
+        mode=_mode(_get(obj, "mode")),
         cycle=_integer(obj, "cycle"),
         overruns=_integer(obj, "overruns"),
         degraded=_boolean(obj, "degraded"),
-        delta_hat=delta_hat,
-        f_hat=_vector(obj, "f_hat_N", m),
-        bf_hat=_wrench(obj, "bf_hat"),
-        u=_vector(obj, "u_N", m),
-        tau_unallocated=_wrench(obj, "tau_unallocated"),
-        saturated=tuple(saturated),
-        port_age_s=_port_ages(_get(obj, "port_age_s")),
-        stale=_port_flags(_get(obj, "stale")),
+        estimation_frozen=_boolean(obj, "estimation_frozen")
+        if "estimation_frozen" in obj
+        else False,
+        delta_hat=tuple(delta_hat.tolist()),
+        f_hat=tuple(_vector(obj, "f_hat_N", m).tolist()),
+        bf_hat=tuple(_wrench(obj, "bf_hat").tolist()),
+        u=tuple(_vector(obj, "u_N", m).tolist()),
+        tau_demand=tuple(_wrench(obj, "tau_demand").tolist()) if "tau_demand" in obj else (),
+        unallocated=tuple(_wrench(obj, "tau_unallocated").tolist()),
+        setpoint_stale=stale.get("setpoint", False),
+        telemetry_stale=stale.get("telemetry", False),
+        setpoint_age_s=ages.get("setpoint", math.inf),
+        telemetry_age_s=ages.get("telemetry", math.inf),
+        malformed=_integer(obj, "malformed") if "malformed" in obj else 0,
+        esc_age_s=esc_ages if len(esc_ages) == m else (),
+        **flags,
+        **esc,
     )
+
+
+def _mode(value: object) -> Mode | None:
+    if value is None:
+        return None
+    try:
+        return Mode(value)
+    except ValueError:
+        raise MalformedMessage(
+            f"mode: {value!r:.40} is not one of {[m.value for m in Mode]}"
+        ) from None
+
+
+def _flag_list(obj: Mapping[str, Any], key: str, m: int) -> tuple[bool, ...]:
+    """m flags (``saturated``), or m or none (the fields added after v1)."""
+    value = _get(obj, key)
+    lengths = (m,) if key == "saturated" else (0, m)
+    if not isinstance(value, list) or len(value) not in lengths:
+        raise MalformedMessage(f"{key}: expected a list of {m} flags, got {value!r:.80}")
+    if not all(isinstance(x, bool) for x in value):
+        raise MalformedMessage(f"{key}: expected true/false flags, got {value!r:.80}")
+    return tuple(value)
+
+
+def _optional_vector(obj: Mapping[str, Any], key: str, m: int) -> list[float]:
+    """A list of m numbers or nulls (null: unknown, NaN)."""
+    value = _get(obj, key)
+    if not isinstance(value, list) or len(value) not in (0, m):
+        raise MalformedMessage(f"{key}: expected a list of {m} numbers or nulls, got {value!r:.80}")
+    named = {f"{key}[{i}]": x for i, x in enumerate(value)}
+    return [_number(named, f"{key}[{i}]", nullable=True) for i in range(len(value))]
 
 
 def _port_ages(value: object) -> dict[str, float]:

@@ -27,6 +27,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.core.errors import ConfigError
+
 DEFAULT_PORT = 7447
 LOOPBACK = "127.0.0.1"
 SHIPPED_CONFIGS = ("allocator", "vessel", "gcs")
@@ -38,7 +40,7 @@ CHECKED_KEYS = (
 )
 
 
-class ZenohConfigError(ValueError):
+class ZenohConfigError(ConfigError):
     """A Zenoh configuration that must not be used; the message names the key and value."""
 
 

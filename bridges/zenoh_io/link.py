@@ -3,7 +3,7 @@
 Each link owns one session opened from a checked config (see :mod:`bridges.zenoh_io.config`),
 declares its publishers, subscribers and queryable once, and is closed by an idempotent
 ``shutdown()`` (or by leaving its ``with`` block). Callbacks run on zenoh-python's threads, only
-decode, then ``put`` into a :class:`~ftcap_hil.core.messages.Mailbox` (or a :class:`FaultInbox`);
+decode, then ``put`` into a :class:`~ftcap_hil.ports.mailbox.Mailbox` (or an ``EventQueue``);
 a payload that fails to decode is counted there (``malformed``) and dropped, never raised.
 Publishing methods return False instead of raising when encoding or the session fails, so
 the caller's loop can mark the port stale and carry on.
@@ -14,7 +14,7 @@ link                   inputs (callbacks -> where)                   outputs (me
 ZenohAllocatorLink     setpoint/wrench -> ``setpoints`` mailbox       publish_thruster_command
 (router)               telemetry/odometry -> ``odometry`` mailbox     publish_status,
                        queryable allocator/state <- snapshot          set_status_snapshot
-ZenohVesselLink        fault/inject -> ``faults`` (FaultInbox)        publish_odometry
+ZenohVesselLink        fault/inject -> ``faults`` (EventQueue)        publish_odometry
 (client)               thrusters/command -> ``commands`` (optional)
 ZenohGcsLink           telemetry/odometry -> ``odometry`` mailbox     publish_setpoint,
 (client)               allocator/status -> ``status`` mailbox         inject_fault, query_state
@@ -24,7 +24,6 @@ ZenohGcsLink           telemetry/odometry -> ``odometry`` mailbox     publish_se
 from __future__ import annotations
 
 import atexit
-import collections
 import functools
 import json
 import logging
@@ -39,7 +38,6 @@ from typing import Any, Protocol, Self, TypeVar
 import zenoh
 
 from bridges.zenoh_io.codec import (
-    AllocatorStatus,
     ZenohKeys,
     decode_fault_injection,
     decode_odometry,
@@ -63,15 +61,10 @@ from bridges.zenoh_io.config import (
     role_settings,
     shipped_config_path,
 )
-from ftcap_hil.core.messages import (
-    FaultInjection,
-    Mailbox,
-    MalformedMessage,
-    Odometry,
-    Stamped,
-    ThrusterCommand,
-    WrenchSetpoint,
-)
+from ftcap_hil.core.errors import MalformedMessage, PortError
+from ftcap_hil.core.messages import FaultInjection, Odometry, ThrusterCommand, WrenchSetpoint
+from ftcap_hil.core.status import AllocatorStatus
+from ftcap_hil.ports.mailbox import EventQueue, Mailbox
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -79,7 +72,7 @@ T_contra = TypeVar("T_contra", contravariant=True)
 _JSON = zenoh.Encoding.APPLICATION_JSON
 
 
-class ZenohLinkError(RuntimeError):
+class ZenohLinkError(PortError):
     """The session could not be opened (router unreachable, port taken, ...)."""
 
 
@@ -145,40 +138,6 @@ def _matched(publisher: zenoh.Publisher) -> bool:
 class _Sink(Protocol[T_contra]):
     def put(self, value: T_contra, stamp_ns: int | None = None) -> None: ...
     def count_malformed(self) -> None: ...
-
-
-class FaultInbox:
-    """Queue of received fault injections: events, so unlike a Mailbox none is overwritten.
-
-    Bounded (``maxlen``): on overflow the oldest is dropped and counted in ``overflowed``.
-    """
-
-    def __init__(self, name: str = "fault", maxlen: int = 64) -> None:
-        self.name = name
-        self.received = 0
-        self.malformed = 0
-        self.overflowed = 0
-        self._queue: collections.deque[Stamped[FaultInjection]] = collections.deque(maxlen=maxlen)
-        self._lock = threading.Lock()
-
-    def put(self, value: FaultInjection, stamp_ns: int | None = None) -> None:
-        stamped = Stamped(value, time.monotonic_ns() if stamp_ns is None else stamp_ns)
-        with self._lock:
-            if len(self._queue) == self._queue.maxlen:
-                self.overflowed += 1
-            self._queue.append(stamped)
-            self.received += 1
-
-    def count_malformed(self) -> None:
-        with self._lock:
-            self.malformed += 1
-
-    def drain(self) -> list[Stamped[FaultInjection]]:
-        """All injections received since the last drain, oldest first."""
-        with self._lock:
-            items = list(self._queue)
-            self._queue.clear()
-        return items
 
 
 # --------------------------------------------------------------------------- links
@@ -368,14 +327,14 @@ class ZenohAllocatorLink(_ZenohLink):
     def publish_thruster_command(self, cmd: ThrusterCommand) -> bool:
         return self._publish(self.keys.thruster_command, encode_thruster_command, cmd)
 
-    def publish_status(self, status: AllocatorStatus | Mapping[str, Any]) -> bool:
+    def publish_status(self, status: AllocatorStatus) -> bool:
         """Publish on ``allocator/status`` and keep it as the snapshot answered to queries."""
         if not self.set_status_snapshot(status):
             return False
         assert self._snapshot is not None
         return self._put(self.keys.status, self._snapshot)
 
-    def set_status_snapshot(self, status: AllocatorStatus | Mapping[str, Any]) -> bool:
+    def set_status_snapshot(self, status: AllocatorStatus) -> bool:
         """Encode now (the caller may reuse its arrays) and answer queries with it."""
         try:
             self._snapshot = encode_status(status)
@@ -400,7 +359,7 @@ class ZenohAllocatorLink(_ZenohLink):
 class ZenohVesselLink(_ZenohLink):
     """The simulated vessel's side; by default a client (``vessel.json5``).
 
-    ``faults`` (:class:`FaultInbox`) receives fault injections; ``commands`` (Mailbox of
+    ``faults`` (an ``EventQueue``) receives fault injections; ``commands`` (Mailbox of
     ThrusterCommand) is filled only with ``monitor_commands=True``; pass your own to share them.
     ``n_thrusters`` makes the decoders refuse a command of another length or a fault on a
     thruster that does not exist.
@@ -415,11 +374,11 @@ class ZenohVesselLink(_ZenohLink):
         *,
         n_thrusters: int | None = None,
         monitor_commands: bool = False,
-        faults: FaultInbox | None = None,
+        faults: EventQueue[FaultInjection] | None = None,
         commands: Mailbox[ThrusterCommand] | None = None,
     ) -> None:
         super().__init__(vessel, config)
-        self.faults = faults if faults is not None else FaultInbox()
+        self.faults = faults if faults is not None else EventQueue[FaultInjection]("zenoh.fault")
         self.commands = commands if commands is not None else Mailbox("thruster_command")
         k = self.keys
         decode_fault = functools.partial(decode_fault_injection, m=n_thrusters)

@@ -8,26 +8,21 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import csv
 import dataclasses
 import logging
 import sys
 import time
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
 from ftcap_hil.config.daemon import LoadedConfig, load_daemon_config
-from ftcap_hil.core.cycle import Mode
-from ftcap_hil.core.geometry import ConfigError
-from ftcap_hil.core.messages import AllocatorStatus, FloatArray, ThrusterCommand
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
 from ftcap_hil.runtime.daemon import AllocatorDaemon, Ports
 
-log = logging.getLogger("ftcap_hil.core.allocator")
-
-# Modes a running daemon may switch to, by FTC_MODE value (oracle needs the truth: never).
-MODE_CODES = {0: Mode.NONE, 1: Mode.CAP, 2: Mode.FTCAP, 3: Mode.FTCAP_LITERAL}
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -45,190 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-class CommandLog:
-    """The allocator's own record of every command it issued, for capture cross-checks.
-
-    A command the bus refused is still a row (the exit log line counts the refusals), so the
-    stamps show the loop's rhythm even while the interface is down. The CAN adapter's own
-    final zero on close comes after the daemon's logged zero and is not a row."""
-
-    def __init__(self, path: Path, m: int) -> None:
-        self._fh: TextIO = open(path, "w", newline="")  # noqa: SIM115 - closed in close()
-        self._w = csv.writer(self._fh)
-        self._w.writerow(["stamp_ns", *[f"u_{i}" for i in range(1, m + 1)]])
-
-    def write(self, stamp_ns: int, u: FloatArray) -> None:
-        self._w.writerow([stamp_ns, *[f"{v:.9g}" for v in u]])
-
-    def close(self) -> None:
-        self._fh.close()
-
-
-class LoggedSink:
-    """Wraps the CAN sink: every command (zeros included) also goes to the command log."""
-
-    def __init__(self, inner: Any, log_: CommandLog | None) -> None:
-        self._inner, self._log = inner, log_
-
-    def send(self, u: FloatArray) -> bool:
-        ok = bool(self._inner.send(u))
-        if self._log is not None:
-            self._log.write(time.monotonic_ns(), u)
-        return ok
-
-    def send_zero(self) -> bool:
-        return self.send(np.zeros(self._inner.force_map.m))
-
-    def tick(self, now_ns: int | None = None) -> Any:
-        return self._inner.tick(now_ns)
-
-
-class MavlinkStatus:
-    """Daemon status -> ACTUATOR_OUTPUT_STATUS + FTCAP_STATUS; announcements -> STATUSTEXT."""
-
-    def __init__(self, link: Any, mav: Any) -> None:
-        self._link, self._mav = link, mav
-
-    def publish(self, st: AllocatorStatus) -> None:
-        mav = self._mav
-        # The first publish comes from the first cycle: it ends the link's BOOT state.
-        state = mav.SystemStatus.STANDBY if st.setpoint_stale else mav.SystemStatus.ACTIVE
-        self._link.set_system_status(state)
-        flags = mav.StatusFlag.NONE
-        for on, flag in (
-            (st.degraded, "DEGRADED"),
-            (st.setpoint_stale, "SETPOINT_STALE"),
-            (st.telemetry_stale, "TELEMETRY_STALE"),
-            (any(st.faulty), "FAULT_DETECTED"),
-            (any(st.saturated), "SATURATED"),
-            (max(map(abs, st.unallocated), default=0.0) > 1e-6, "UNALLOCATED"),
-        ):
-            if on:
-                flags |= mav.StatusFlag[flag]
-        self._link.send_thruster_commands(ThrusterCommand.checked(st.u))
-        if st.esc_age_s:
-            self._link.send_esc_status(st.esc_rpm, st.esc_current_a, st.esc_age_s, st.esc_failed)
-        self._link.send_status(
-            mav.AllocatorStatus(
-                np.asarray(st.tau_demand),
-                np.asarray(st.unallocated),
-                np.asarray(st.delta_hat),
-                np.asarray(st.f_hat),
-                flags,
-            )
-        )
-
-    def announce(self, text: str, severity: str) -> None:
-        sev = self._mav.Severity.WARNING if severity == "warning" else self._mav.Severity.INFO
-        self._link.send_statustext(text, sev)
-
-
-class ZenohStatus:
-    def __init__(self, link: Any, zc: Any) -> None:
-        self._link, self._zc = link, zc
-
-    def publish(self, st: AllocatorStatus) -> None:
-        self._link.publish_thruster_command(ThrusterCommand.checked(st.u))
-        self._link.publish_status(
-            self._zc.AllocatorStatus(
-                mode=st.mode,
-                cycle=st.cycle,
-                overruns=st.overruns,
-                degraded=st.degraded,
-                delta_hat=np.asarray(st.delta_hat),
-                f_hat=np.asarray(st.f_hat),
-                bf_hat=np.asarray(st.bf_hat),
-                u=np.asarray(st.u),
-                tau_unallocated=np.asarray(st.unallocated),
-                saturated=tuple(st.saturated),
-                port_age_s={
-                    "setpoint": st.setpoint_age_s,
-                    "telemetry": st.telemetry_age_s,
-                    **{f"esc{i + 1}": a for i, a in enumerate(st.esc_age_s)},
-                },
-                stale={"setpoint": st.setpoint_stale, "telemetry": st.telemetry_stale},
-            )
-        )
-
-    def announce(self, text: str, severity: str) -> None:
-        log.debug("zenoh carries no text channel: %s", text)
-
-
-def param_specs(cfg: LoadedConfig) -> list[Any]:
-    """The tunables exposed over MAVLink. Refused while running, and why:
-    FTC_WINDOW sizes the estimator's buffers (changing it would discard the window),
-    FTC_RATE_HZ fixes the deadlines and the per-cycle rate limits, FTC_UMAX is the
-    hardware's amplitude limit from the vessel file: restart with a new config instead."""
-    from bridges.mavlink.params import ParamSpec, ParamType
-
-    d, c = cfg.daemon, cfg.daemon.core
-    mode_code = {v: k for k, v in MODE_CODES.items()}[c.mode]
-    inf = float("inf")
-    return [
-        ParamSpec(
-            "FTC_MODE",
-            mode_code,
-            ParamType.INT,
-            0,
-            3,
-            description="0 none, 1 cap, 2 ftcap, 3 ftcap-literal",
-        ),
-        ParamSpec(
-            "FTC_SP_TMO",
-            d.setpoint_timeout_s,
-            min=0.01,
-            max=60.0,
-            description="setpoint timeout (s) -> zero thrust",
-        ),
-        ParamSpec(
-            "FTC_TLM_TMO",
-            d.telemetry_timeout_s,
-            min=0.01,
-            max=60.0,
-            description="telemetry timeout (s) -> estimation frozen",
-        ),
-        ParamSpec(
-            "FTC_ESC_TMO",
-            d.esc_timeout_s,
-            min=0.01,
-            max=60.0,
-            description="ESC silence (s) -> thruster failed",
-        ),
-        ParamSpec("FTC_SLACK_W", c.allocator.slack_weight, min=1e-3, max=1e12),
-        ParamSpec("FTC_EFFORT_W", c.allocator.effort_weight, min=1e-9, max=1e6),
-        ParamSpec("FTC_DEAD_THR", c.allocator.dead_threshold, min=0.0, max=0.99),
-        ParamSpec("FTC_DITHER", c.excitation.dither_amplitude, min=0.0, max=0.5),
-        ParamSpec("FTC_PROBE_INT", c.excitation.probe_interval, ParamType.INT, 0, 1e6),
-        ParamSpec(
-            "FTC_WINDOW",
-            c.estimator.window,
-            ParamType.INT,
-            2,
-            10000,
-            settable_while_running=False,
-            description="estimator window (restart)",
-        ),
-        ParamSpec(
-            "FTC_RATE_HZ",
-            d.rate_hz,
-            min=0.1,
-            max=2000.0,
-            settable_while_running=False,
-            description="loop rate (restart)",
-        ),
-        ParamSpec(
-            "FTC_UMAX",
-            float(np.max(d.thrusters.u_max)),
-            min=0.0,
-            max=inf,
-            settable_while_running=False,
-            description="thruster limit (vessel file)",
-        ),
-    ]
-
-
 def apply_params(daemon: AllocatorDaemon, values: dict[str, float]) -> None:
     """Loop thread: bring the daemon in line with the parameter table."""
+    from bridges.mavlink.allocator_params import MODE_CODES
+
     mode = MODE_CODES[int(values["FTC_MODE"])]
     if mode is not daemon.config.core.mode:
         daemon.set_mode(mode)
@@ -293,15 +108,18 @@ def build_ports(
     ports = Ports(
         setpoints=[],
         telemetry=[],
-        thrusters=LoggedSink(sink, cmd_log),
+        thrusters=LoggedSink(sink, cfg.daemon.thrusters.m, cmd_log),
         esc_ages=esc.ages_s if esc is not None else None,
     )
     params = None
     mav_cfg = _section(cfg, "mavlink")
     if mav_cfg.pop("enabled", True):
         from bridges.mavlink import allocator as mav
+        from bridges.mavlink.allocator_params import allocator_param_specs
         from bridges.mavlink.config import MavlinkEndpoint, default_allocator_endpoint
+        from bridges.mavlink.status import MavlinkStatusSink
 
+        d = cfg.daemon
         max_wrench = tuple(mav_cfg.pop("max_wrench", (0.3, 0.3, 0.06)))
         limit = mav_cfg.pop("wrench_limit", None)
         endpoint = MavlinkEndpoint.from_mapping("mavlink", mav_cfg, default_allocator_endpoint())
@@ -311,18 +129,25 @@ def build_ports(
                     cfg.daemon.thrusters.m, max_wrench, None if limit is None else tuple(limit)
                 ),
                 endpoint,
-                param_specs(cfg),
+                allocator_param_specs(
+                    d.core,
+                    d.setpoint_timeout_s,
+                    d.telemetry_timeout_s,
+                    d.esc_timeout_s,
+                    d.rate_hz,
+                    float(np.max(d.thrusters.u_max)),
+                ),
             )
         )
         ports.setpoints += [link.setpoint, link.manual]
         ports.telemetry.append(link.odometry)
-        ports.status.append(MavlinkStatus(link, mav))
+        ports.status.append(MavlinkStatusSink(link))
         params = link.params
     z_cfg = _section(cfg, "zenoh")
     if z_cfg.pop("enabled", True):
-        from bridges.zenoh_io import codec as zenoh_codec
         from bridges.zenoh_io import config as zenoh_config
         from bridges.zenoh_io import link as zenoh_link
+        from bridges.zenoh_io.status import ZenohStatusSink
 
         conf_name = str(z_cfg.get("config", "allocator.json5"))
         path = Path(conf_name)
@@ -334,7 +159,7 @@ def build_ports(
         )
         ports.setpoints.append(zl.setpoints)
         ports.telemetry.append(zl.odometry)
-        ports.status.append(ZenohStatus(zl, zenoh_codec))
+        ports.status.append(ZenohStatusSink(zl))
     return ports, params
 
 

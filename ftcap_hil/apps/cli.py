@@ -18,7 +18,7 @@ _COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("ftcap_hil.apps.simulate", "Offline closed-loop simulation of a scenario"),
     "allocator": ("ftcap_hil.apps.allocator", "Run the allocator daemon"),
     "sim": (
-        "ftcap_hil.runtime.vessel_process",
+        "ftcap_hil.apps.sim",
         "Run the simulated vessel (plant, ESCs on CAN, fault injector)",
     ),
     "gcs": ("ftcap_hil.apps.gcs", "Ground-station script: fly a mission over MAVLink"),

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-log = logging.getLogger("ftcap_hil.demo")
+log = logging.getLogger(__name__)
 
 LOCALHOST = "127.0.0.1"
 DEFAULT_MISSION = "paper-4.2-ex1-short"
@@ -294,7 +294,7 @@ def expected_duration(mission: str, duration: float | None) -> float:
 
 
 def print_summary(out: Path, wall_s: float) -> None:
-    from ftcap_hil.config.mission import summary_lines
+    from ftcap_hil.report.summary import flight_summary_lines as summary_lines
 
     path = out / "results.json"
     if not path.exists():

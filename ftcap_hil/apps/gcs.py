@@ -34,21 +34,16 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.config.mission import (
-    FlightRecorder,
-    Injection,
-    Mission,
-    injection_plan,
-    limit_wrench,
-    load_mission,
-    shipped_missions,
-    summary_lines,
-)
-from ftcap_hil.core.geometry import ConfigError
+from ftcap_hil.config.mission import Mission, load_mission, shipped_missions
+from ftcap_hil.core.controllers import limit_wrench
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.faults import Injection, injection_plan
 from ftcap_hil.core.messages import FloatArray
+from ftcap_hil.report.flight import FlightRecorder
 from ftcap_hil.report.records import RunRecord
+from ftcap_hil.report.summary import flight_summary_lines as summary_lines
 
-log = logging.getLogger("ftcap_hil.gcs")
+log = logging.getLogger(__name__)
 
 
 class Exit(enum.IntEnum):
@@ -260,7 +255,7 @@ class Flight:
     def run(self, injector: Injector) -> None:
         period_ns = int(self.mission.period_s * 1e9)
         end_ns = self.t0_ns + int(self.mission.duration_s * 1e9)
-        plan = deque(injection_plan(self.mission.scenario))
+        plan = deque(injection_plan(self.mission.scenario.faults, self.mission.duration_s))
         deadline = self.t0_ns
         while not self.should_exit:
             now = time.monotonic_ns()
@@ -283,8 +278,8 @@ class Flight:
 def connect(link: Any, mission: Mission, inject: bool) -> tuple[str, int]:
     """Heartbeats, allocator loop running, SYS_FAILURE_EN, FTC_MODE, first ODOMETRY
     -> (mode name, t0 stamp)."""
+    from bridges.mavlink.allocator_params import CODE_OF_MODE, MODE_CODES
     from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM
-    from ftcap_hil.apps.allocator import MODE_CODES
 
     timeout = mission.gcs.connect_timeout_s
     for name, ids in (("vessel", link.vessel_ids), ("allocator", link.allocator_ids)):
@@ -303,7 +298,7 @@ def connect(link: Any, mission: Mission, inject: bool) -> tuple[str, int]:
     if inject and link.set_param(link.vessel_ids, FAILURE_ENABLE_PARAM, 1) != 1:
         raise GcsError(f"the vessel did not accept {FAILURE_ENABLE_PARAM} = 1", Exit.NO_ANSWER)
     if mission.mode is not None:
-        code = {v: k for k, v in MODE_CODES.items()}[mission.mode]
+        code = CODE_OF_MODE[mission.mode]
         if link.set_param(link.allocator_ids, "FTC_MODE", code) != code:
             raise GcsError(f"the allocator refused FTC_MODE = {code}", Exit.NO_ANSWER)
     params = link.fetch_params(link.allocator_ids, timeout_s=min(timeout, 5.0))
@@ -351,7 +346,7 @@ def _endpoint(args: argparse.Namespace) -> Any:
 def fly_mission(args: argparse.Namespace, mission: Mission, out: Path) -> int:
     from bridges.mavlink.gcs import MavlinkGcsLink
 
-    inject = bool(injection_plan(mission.scenario))
+    inject = bool(injection_plan(mission.scenario.faults, mission.duration_s))
     started = time.monotonic()
     with MavlinkGcsLink(_endpoint(args)) as link:
         mode, t0_ns = connect(link, mission, inject)
@@ -364,7 +359,7 @@ def fly_mission(args: argparse.Namespace, mission: Mission, out: Path) -> int:
             mission.period_s,
         )
         flight = Flight(
-            mission, link, t0_ns, FlightRecorder(mission), StatusLine(sys.stderr.isatty())
+            mission, link, t0_ns, FlightRecorder(mission.scenario), StatusLine(sys.stderr.isatty())
         )
         injector = Injector(link, t0_ns)
         saved = {s: signal.signal(s, flight.request_exit) for s in (signal.SIGINT, signal.SIGTERM)}

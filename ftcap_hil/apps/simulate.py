@@ -9,16 +9,15 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
-import math
 import sys
 from pathlib import Path
-from typing import Any
 
 from ftcap_hil.config.scenario import load_scenario, shipped_scenarios
-from ftcap_hil.core.cycle import Mode
-from ftcap_hil.core.geometry import ConfigError
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.status import Mode
+from ftcap_hil.report.summary import offline_summary_lines
 
-log = logging.getLogger("ftcap_hil.simulate")
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -41,18 +40,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-
-
-def summary_lines(res: dict[str, Any]) -> list[str]:
-    lines = [f"{res['scenario']}: phases {[(round(a, 2), round(b, 2)) for a, b in res['phases']]}"]
-    for mode, r in res["modes"].items():
-        phases = " | ".join(
-            f"dev {p.get('deviation_rms', math.nan):.4f}/{p.get('deviation_max', math.nan):.3f}"
-            f" trk {p['tracking_rms']:.3f}"
-            for p in r["phases"]
-        )
-        lines.append(f"  {mode:14s} {phases}  cycle {r['cycle_us_median']:.0f} us")
-    return lines
 
 
 def run(args: argparse.Namespace) -> int:
@@ -81,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         from ftcap_hil.report.plots import write_plots
 
         write_plots(records, args.out)
-    for line in summary_lines(res):
+    for line in offline_summary_lines(res):
         print(line)
     print(
         f"wrote {args.out}/results.json, {len(records)} timeseries.csv"

@@ -8,24 +8,23 @@ The shipped defaults are ``ftcap_hil/data/hil/allocator.toml``; see docs/hil.md.
 
 from __future__ import annotations
 
-import copy
 import math
-import tomllib
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from ftcap_hil.config.scenario import dataclass_from_table, plant_from_tables
+from ftcap_hil.config.tables import dataclass_from_table
+from ftcap_hil.config.toml import HIL_DATA, read_toml
+from ftcap_hil.config.vessel import plant_from_tables
 from ftcap_hil.core.allocator import AllocatorConfig
-from ftcap_hil.core.cycle import CoreConfig, Mode
+from ftcap_hil.core.cycle import CoreConfig
+from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.estimator import EstimatorConfig
 from ftcap_hil.core.excitation import ExcitationConfig
-from ftcap_hil.core.geometry import ConfigError
 from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.daemon import DaemonConfig
 
-HIL_DATA = "ftcap_hil.data.hil"
 _DAEMON_KEYS = {
     "rate_hz",
     "estimation_period_s",
@@ -44,34 +43,6 @@ class LoadedConfig:
     daemon: DaemonConfig
     raw: dict[str, Any]  # the merged TOML, for the bridge sections
     source: str
-
-
-def shipped_config(name: str) -> Path:
-    path = Path(str(resources.files(HIL_DATA).joinpath(name)))
-    if not path.exists():
-        raise ConfigError(f"no shipped config {name!r} in {HIL_DATA}")
-    return path
-
-
-def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
-    """``section.key=value`` with value parsed as TOML (strings may be bare)."""
-    out = copy.deepcopy(data)
-    for item in overrides:
-        if "=" not in item or "." not in item.split("=", 1)[0]:
-            raise ConfigError(f"--set {item!r}: expected SECTION.KEY=VALUE")
-        key, text = item.split("=", 1)
-        try:
-            value = tomllib.loads(f"v = {text}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = text
-        *path, leaf = key.split(".")
-        table = out
-        for part in path:
-            table = table.setdefault(part, {})
-            if not isinstance(table, dict):
-                raise ConfigError(f"--set {item!r}: {part!r} is not a table")
-        table[leaf] = value
-    return out
 
 
 def _positive(d: dict[str, Any], key: str, default: float) -> float:
@@ -134,13 +105,6 @@ def daemon_config_from(data: dict[str, Any], where: str) -> DaemonConfig:
 
 
 def load_daemon_config(path: str | Path | None, overrides: list[str] | None = None) -> LoadedConfig:
-    """A TOML file (or the shipped default when path is None) plus overrides."""
-    src = Path(path) if path is not None else shipped_config("allocator.toml")
-    try:
-        data = tomllib.loads(src.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"config {str(src)!r}: no such file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{src}: {e}") from e
-    data = apply_overrides(data, overrides or [])
-    return LoadedConfig(daemon_config_from(data, str(src)), data, str(src))
+    """A TOML file (or the shipped ``allocator.toml`` when path is None) plus overrides."""
+    doc = read_toml(path if path is not None else "allocator", HIL_DATA, overrides, "config")
+    return LoadedConfig(daemon_config_from(doc.data, doc.source), doc.data, doc.source)

@@ -42,3 +42,10 @@ class PoseController:
         c, s = math.cos(eta[2]), math.sin(eta[2])
         body = np.array([c * err[0] + s * err[1], -s * err[0] + c * err[1], err[2]])
         return self.kp * (self.k_eta * body - nu)
+
+
+def limit_wrench(v: FloatArray, limit: tuple[float, float, float]) -> FloatArray:
+    """Shrink ``v`` along its direction so that |v_j| <= limit_j (the allocator drops a
+    WRENCH_SETPOINT beyond its wrench limit as malformed)."""
+    scale = float(np.max(np.abs(v) / np.asarray(limit)))
+    return v / scale if scale > 1.0 else v

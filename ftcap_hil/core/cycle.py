@@ -14,7 +14,6 @@ e.g. after the shell had to send zero).
 
 from __future__ import annotations
 
-import enum
 import math
 from dataclasses import dataclass, field, replace
 
@@ -29,20 +28,10 @@ from ftcap_hil.core.estimator import (
     wrench_scale,
 )
 from ftcap_hil.core.excitation import Excitation, ExcitationConfig
+from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, FloatArray
-
-
-class Mode(enum.Enum):
-    NONE = "none"  # reference run: no faults injected, allocator as CAP
-    CAP = "cap"  # allocation without estimation (Delta_hat = I, f_hat = 0)
-    FTCAP = "ftcap"  # windowed joint estimation (default)
-    FTCAP_LITERAL = "ftcap-literal"  # the paper's eqs. (9)-(11) read literally
-    ORACLE = "oracle"  # the true Delta and f handed to the allocator
-
-    @property
-    def estimates(self) -> bool:
-        return self in (Mode.FTCAP, Mode.FTCAP_LITERAL)
+from ftcap_hil.core.status import Mode
 
 
 @dataclass(frozen=True)
@@ -57,14 +46,6 @@ class CoreConfig:
     # two samples by a minimum change and may dip transiently on healthy thrusters.
     fault_threshold: float = 0.85
     fault_clear: float = 0.95
-
-
-@dataclass(frozen=True)
-class Truth:
-    """The faults actually acting (for the oracle and for metrics)."""
-
-    delta: FloatArray
-    f: FloatArray
 
 
 @dataclass(frozen=True)

@@ -210,10 +210,12 @@ class WindowedEstimator:
         # daqp (dual active set, C) solves this 7-variable box QP in a few microseconds,
         # cheaper than numpy's generic solve plus a fallback when a bound is active.
         x, _f, flag, _info = self._daqp(H, -g, self._no_rows, self._hi, self._lo, self._sense)
+        x = np.asarray(x, dtype=np.float64)
         if flag >= 1 and math.isfinite(x.sum()):
-            return np.minimum(np.maximum(x, self._lo, out=x), self._hi, out=x)
-        theta = np.linalg.lstsq(H, g, rcond=None)[0]  # not reached in practice: H is PD
-        return np.clip(theta, self._lo, self._hi)
+            np.minimum(np.maximum(x, self._lo, out=x), self._hi, out=x)
+            return x
+        theta = np.asarray(np.linalg.lstsq(H, g, rcond=None)[0], dtype=np.float64)
+        return np.clip(theta, self._lo, self._hi)  # not reached in practice: H is PD
 
     def estimate(self, innovation: float = 0.0, restarted: bool = False) -> Estimate:
         delta = self.theta[: self._m].copy()

@@ -14,19 +14,11 @@ radius l/2 (``paper_four_thrusters``); the paper never gives l, we default to 0.
 from __future__ import annotations
 
 import math
-import tomllib
-from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
-
-
-class ConfigError(ValueError):
-    """A configuration value is wrong; the message names the key and the value."""
 
 
 @dataclass(frozen=True)
@@ -131,94 +123,3 @@ def paper_four_thrusters(
             for name, x, y, a in layout
         )
     )
-
-
-def _number(table: dict[str, Any], key: str, where: str) -> float:
-    if key not in table:
-        raise ConfigError(f"{where}.{key}: missing")
-    value = table[key]
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ConfigError(f"{where}.{key}: expected a finite number, got {value!r}")
-    return float(value)
-
-
-def _optional(table: dict[str, Any], key: str, where: str) -> float | None:
-    return _number(table, key, where) if key in table else None
-
-
-def thruster_from_table(table: dict[str, Any], where: str) -> Thruster:
-    """One ``[[thruster]]`` entry: name, x, y, angle_deg (or direction = [dx, dy]),
-    u_min, u_max, and optionally rate_max (N/s) or step_max (N per cycle)."""
-    name = str(table.get("name", where))
-    if "direction" in table:
-        d = table["direction"]
-        if not (isinstance(d, Sequence) and len(d) == 2):
-            raise ConfigError(f"{where}.direction: expected [dx, dy], got {d!r}")
-        angle = math.atan2(float(d[1]), float(d[0]))
-        if math.hypot(float(d[0]), float(d[1])) == 0.0:
-            raise ConfigError(f"{where}.direction: zero vector")
-    else:
-        angle = math.radians(_number(table, "angle_deg", where))
-    thruster = Thruster(
-        name=name,
-        x_m=_number(table, "x", where),
-        y_m=_number(table, "y", where),
-        angle_rad=angle,
-        u_min=_number(table, "u_min", where),
-        u_max=_number(table, "u_max", where),
-        rate_max=_optional(table, "rate_max", where),
-        step_max=_optional(table, "step_max", where),
-    )
-    if not thruster.u_min <= 0.0 <= thruster.u_max or thruster.u_min == thruster.u_max:
-        raise ConfigError(
-            f"{where}: need u_min <= 0 <= u_max, got {thruster.u_min}, {thruster.u_max}"
-        )
-    if thruster.rate_max is not None and thruster.step_max is not None:
-        raise ConfigError(f"{where}: give rate_max or step_max, not both")
-    for key in ("rate_max", "step_max"):
-        value = getattr(thruster, key)
-        if value is not None and value <= 0.0:
-            raise ConfigError(f"{where}.{key}: must be > 0, got {value}")
-    return thruster
-
-
-def thrusters_from_table(table: dict[str, Any], where: str = "vessel") -> ThrusterSet:
-    """A vessel table: either ``preset = "paper-4.2"`` (with optional l, u_limit, and
-    step_limit (N per allocator cycle, the paper's form) or rate_limit (N/s))
-    or a list ``thruster = [{...}, ...]`` (TOML ``[[vessel.thruster]]``)."""
-    preset = table.get("preset")
-    if preset is not None:
-        if preset != "paper-4.2":
-            raise ConfigError(f"{where}.preset: unknown preset {preset!r} (known: 'paper-4.2')")
-        unknown = set(table) - {"preset", "l", "u_limit", "step_limit", "rate_limit"}
-        if unknown:
-            raise ConfigError(f"{where}: unknown keys {sorted(unknown)} for the paper-4.2 preset")
-        values = {"l": 0.3, "u_limit": 0.1, "step_limit": 0.09}
-        for key in ("l", "u_limit", "step_limit", "rate_limit"):
-            if key in table:
-                values[key] = _number(table, key, where)
-                if values[key] <= 0.0:
-                    raise ConfigError(f"{where}.{key}: must be > 0, got {values[key]}")
-        return paper_four_thrusters(
-            l_m=values["l"],
-            u_limit=values["u_limit"],
-            step_limit=values["step_limit"],
-            rate_limit=values.get("rate_limit"),
-        )
-    entries = table.get("thruster")
-    if not isinstance(entries, list) or not entries:
-        raise ConfigError(f"{where}.thruster: expected a non-empty list of thrusters")
-    thrusters = tuple(
-        thruster_from_table(t, f"{where}.thruster[{i}]") for i, t in enumerate(entries)
-    )
-    names = [t.name for t in thrusters]
-    if len(set(names)) != len(names):
-        raise ConfigError(f"{where}.thruster: duplicate names in {names}")
-    return ThrusterSet(thrusters)
-
-
-def load_vessel(path: str | Path) -> ThrusterSet:
-    """Read a vessel TOML file (top-level table as in ``thrusters_from_table``)."""
-    with open(path, "rb") as fh:
-        data = tomllib.load(fh)
-    return thrusters_from_table(data.get("vessel", data), where=str(path))

@@ -9,28 +9,24 @@ Everything is SI and body-frame unless the field name says otherwise:
 * thruster forces ``u``: (m,) in N, one per thruster, in the order of the vessel file.
 
 Stamps are ``time.monotonic_ns()`` of the receiving process unless named otherwise.
-Bridges validate on receipt: a message that fails ``validate()`` is counted and dropped.
+Bridges validate on receipt: a message whose ``checked`` constructor raises
+:class:`~ftcap_hil.core.errors.MalformedMessage` is counted and dropped.
 """
 
 from __future__ import annotations
 
 import enum
 import math
-import threading
-import time
-from dataclasses import dataclass, field
-from typing import Generic, TypeVar
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
+from ftcap_hil.core.errors import MalformedMessage
+
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 IntArray = npt.NDArray[np.intp]
-
-
-class MalformedMessage(ValueError):
-    """Raised by a bridge's decoder (or ``validate``) for input that must be dropped."""
 
 
 def _finite_vector(name: str, value: object, length: int | None = None) -> FloatArray:
@@ -107,84 +103,3 @@ class EscStatus:
     current_a: float
     voltage_v: float = math.nan
     error_count: int = 0
-
-
-T = TypeVar("T")
-
-
-@dataclass
-class Stamped(Generic[T]):
-    value: T
-    stamp_ns: int
-
-
-@dataclass
-class Mailbox(Generic[T]):
-    """Latest-value slot written by library callbacks, read by the loop thread.
-
-    Callbacks never run allocator code: they validate, then ``put``. The loop ``take``s the
-    latest value with its age. Counters let the status report drops per port.
-    """
-
-    name: str
-    _slot: Stamped[T] | None = None
-    received: int = 0
-    malformed: int = 0
-    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
-    notify: threading.Event | None = None  # set on every put: wakes the loop early
-
-    def put(self, value: T, stamp_ns: int | None = None) -> None:
-        stamped = Stamped(value, time.monotonic_ns() if stamp_ns is None else stamp_ns)
-        with self._lock:
-            self._slot = stamped
-            self.received += 1
-        if self.notify is not None:
-            self.notify.set()
-
-    def count_malformed(self) -> None:
-        with self._lock:
-            self.malformed += 1
-
-    def latest(self) -> Stamped[T] | None:
-        with self._lock:
-            return self._slot
-
-    def age_s(self, now_ns: int | None = None) -> float:
-        """Seconds since the latest value arrived; +inf if none ever did."""
-        slot = self.latest()
-        if slot is None:
-            return math.inf
-        now = time.monotonic_ns() if now_ns is None else now_ns
-        return (now - slot.stamp_ns) * 1e-9
-
-
-@dataclass(frozen=True)
-class AllocatorStatus:
-    """What the daemon publishes (decimated) and answers to queries. SI units."""
-
-    mode: str
-    cycle: int
-    overruns: int
-    degraded: bool  # the last cycle used the fallback allocation
-    setpoint_stale: bool
-    telemetry_stale: bool
-    estimation_frozen: bool
-    delta_hat: tuple[float, ...]
-    f_hat: tuple[float, ...]
-    bf_hat: tuple[float, ...]
-    u: tuple[float, ...]
-    tau_demand: tuple[float, ...]
-    unallocated: tuple[float, ...]
-    saturated: tuple[bool, ...]
-    faulty: tuple[bool, ...]
-    esc_failed: tuple[bool, ...]
-    probing: tuple[bool, ...]
-    setpoint_age_s: float
-    telemetry_age_s: float
-    malformed: int  # malformed messages dropped, all ports
-    esc_rpm: tuple[float, ...] = ()  # last reported, NaN if never (empty: no ESC monitor)
-    esc_current_a: tuple[float, ...] = ()
-    esc_age_s: tuple[float, ...] = ()
-
-    def as_dict(self) -> dict[str, object]:
-        return {f: getattr(self, f) for f in self.__dataclass_fields__}

@@ -70,9 +70,10 @@ class SurfaceVessel:
         )
 
     def nu_dot(self, nu: FloatArray, tau: FloatArray) -> FloatArray:
-        return (tau - self.drag_and_coriolis(nu)) / np.array(
-            [self.mass_kg, self.mass_kg, self.iz_kgm2]
-        )
+        """M^-1 (tau - (C + D) nu): body accelerations (m/s^2, m/s^2, rad/s^2)."""
+        inertia = np.array([self.mass_kg, self.mass_kg, self.iz_kgm2])
+        out: FloatArray = (tau - self.drag_and_coriolis(nu)) / inertia
+        return out
 
     @staticmethod
     def eta_dot(eta: FloatArray, nu: FloatArray) -> FloatArray:

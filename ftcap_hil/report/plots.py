@@ -21,9 +21,9 @@ import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from ftcap_hil.config.scenario import Scenario  # noqa: E402
 from ftcap_hil.core.messages import FloatArray  # noqa: E402
 from ftcap_hil.core.plants import SurfaceVessel  # noqa: E402
+from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.report.records import RunRecord  # noqa: E402
 
 FIGSIZE = (10.0, 7.0)
@@ -36,7 +36,7 @@ MODE_COLORS = {
     "oracle": "tab:green",
 }
 EXTRA_COLORS = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
-TRUTH = {"color": "black", "lw": 2.4, "alpha": 0.7, "zorder": 1}
+TRUTH: dict[str, Any] = {"color": "black", "lw": 2.4, "alpha": 0.7, "zorder": 1}
 VESSEL_V = ("surge X", "sway Y", "yaw N")
 VESSEL_V_UNITS = ("N", "N", "N m")
 

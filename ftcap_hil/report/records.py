@@ -14,10 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.config.scenario import Scenario
-from ftcap_hil.core.cycle import CycleResult, Truth
+from ftcap_hil.core.allocator import AllocationStatus
+from ftcap_hil.core.cycle import CycleResult
+from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.plants import LinearPlant, wrap_angle
+from ftcap_hil.core.scenario import Scenario
 
 CONVERGENCE_TOL = 0.05  # |delta_hat - delta| for "converged"
 SCHEMA_VERSION = 1
@@ -87,7 +89,7 @@ class Recorder:
                 [
                     est.innovation,
                     est.window_len,
-                    res.allocation.status.value != "ok",
+                    res.allocation.status is not AllocationStatus.OK,
                     bool(np.any(res.probing)),
                     solve_s * 1e6,
                 ],

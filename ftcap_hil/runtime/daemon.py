@@ -32,20 +32,20 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore, Mode
+from ftcap_hil.core.allocator import AllocationStatus
+from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
 from ftcap_hil.core.geometry import ThrusterSet
-from ftcap_hil.core.messages import (
-    AllocatorStatus,
-    BoolArray,
-    EscStatus,
-    FloatArray,
-    Mailbox,
-    Odometry,
-    WrenchSetpoint,
-)
+from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
 from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
+from ftcap_hil.ports.mailbox import Mailbox
 
-log = logging.getLogger("ftcap_hil.runtime.daemon")
+log = logging.getLogger(__name__)
+_LOG_LEVEL = {
+    Severity.INFO: logging.INFO,
+    Severity.WARNING: logging.WARNING,
+    Severity.ERROR: logging.ERROR,
+}
 
 
 class ThrusterSink(Protocol):
@@ -56,7 +56,7 @@ class ThrusterSink(Protocol):
 
 class StatusSink(Protocol):
     def publish(self, status: AllocatorStatus) -> None: ...
-    def announce(self, text: str, severity: str) -> None: ...
+    def announce(self, text: str, severity: Severity) -> None: ...
 
 
 @dataclass
@@ -358,7 +358,7 @@ class AllocatorDaemon:
                 not heard[i],
                 f"ESC {n} not heard yet: thruster held at 0",
                 f"ESC {n} reporting",
-                on_severity="info",
+                on_severity=Severity.INFO,
             )
             self._transition(
                 f"esc{n}",
@@ -400,12 +400,12 @@ class AllocatorDaemon:
         return self.config.plant.measured_wrench(x0, x1, dt), u_mean
 
     def _transition(
-        self, key: str, value: bool, on: str, off: str, on_severity: str = "warning"
+        self, key: str, value: bool, on: str, off: str, on_severity: Severity = Severity.WARNING
     ) -> None:
         old = self._flags.get(key, False)
         if value != old:
             self._flags[key] = value
-            self._announce(on if value else off, on_severity if value else "info")
+            self._announce(on if value else off, on_severity if value else Severity.INFO)
 
     def _report_transitions(self, r: CycleResult, esc_failed: BoolArray | None) -> None:
         for i, faulty in enumerate(r.faulty):
@@ -416,7 +416,7 @@ class AllocatorDaemon:
                 f"thruster {i + 1} fault detected: delta_hat {d:.2f}",
                 f"thruster {i + 1} fault cleared: delta_hat {d:.2f}",
             )
-        degraded = r.allocation.status.value != "ok"
+        degraded = r.allocation.status is not AllocationStatus.OK
         self._transition(
             "degraded",
             degraded,
@@ -424,8 +424,8 @@ class AllocatorDaemon:
             "allocation nominal",
         )
 
-    def _announce(self, text: str, severity: str) -> None:
-        getattr(log, "warning" if severity == "warning" else "info")(text)
+    def _announce(self, text: str, severity: Severity) -> None:
+        log.log(_LOG_LEVEL[severity], "%s", text)
         for sink in self.ports.status:
             sink.announce(text, severity)
 
@@ -454,7 +454,7 @@ class AllocatorDaemon:
             return tuple(a.tolist()) if a is not None else (default,) * m
 
         return AllocatorStatus(
-            mode=self.config.core.mode.value,
+            mode=self.config.core.mode,
             cycle=self.cycles,
             overruns=self.overruns,
             degraded=bool(self._flags.get("degraded", False)),
@@ -498,4 +498,4 @@ class AllocatorDaemon:
             self._malformed_seen = st.malformed
             if st.cycle - self._malformed_cycle >= self.config.rate_hz * 5:  # at most 1 per 5 s
                 self._malformed_cycle = st.cycle
-                self._announce(f"malformed input dropped: {st.malformed} so far", "warning")
+                self._announce(f"malformed input dropped: {st.malformed} so far", Severity.WARNING)

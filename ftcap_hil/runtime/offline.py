@@ -13,10 +13,12 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ftcap_hil.config.scenario import FaultSchedule, Scenario
-from ftcap_hil.core.cycle import FtcapCore, Mode
+from ftcap_hil.core.cycle import FtcapCore
+from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.plants import LinearPlant
+from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import Recorder, RunRecord
 
 

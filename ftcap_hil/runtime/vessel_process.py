@@ -24,7 +24,6 @@ telemetry sample: true state, commands, produced forces and true faults.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import csv
 import json
@@ -33,38 +32,37 @@ import math
 import signal
 import threading
 import time
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 
-from ftcap_hil.config.daemon import apply_overrides, shipped_config
-from ftcap_hil.config.scenario import load_scenario, plant_from_tables
-from ftcap_hil.core.geometry import ConfigError, ThrusterSet
-from ftcap_hil.core.messages import (
-    BoolArray,
-    EscStatus,
-    FaultInjection,
-    Odometry,
-    Stamped,
-    ThrusterCommand,
-)
-from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.errors import ConfigError, PortError
+from ftcap_hil.core.geometry import ThrusterSet
+from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, Odometry, ThrusterCommand
+from ftcap_hil.ports.mailbox import Stamped
 from sim.vessel import (
     Decimator,
-    ShellSettings,
     SimSample,
     VesselSim,
     VesselSimConfig,
     record_header,
     record_row,
-    shell_settings_from,
-    sim_config_from,
 )
 
-log = logging.getLogger("sim.vessel")
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ShellSettings:
+    """What the process shell needs beyond the simulation itself (rates in wall-clock Hz)."""
+
+    rate_hz: float = 50.0
+    telemetry_rate_hz: float = 20.0
+    esc_status_rate_hz: float = 10.0
+    realtime_factor: float = 1.0  # sim seconds per wall second
+    fault_injection_enabled: bool = False  # SYS_FAILURE_EN at start-up
 
 
 @dataclass(frozen=True)
@@ -73,37 +71,6 @@ class VesselConfig:
     sim: VesselSimConfig
     raw: dict[str, Any]  # the merged TOML, for the bridge sections
     source: str
-
-
-def load_config(
-    path: str | Path | None, overrides: list[str], scenario: str | None = None
-) -> VesselConfig:
-    """TOML file (shipped ``vessel.toml`` if None) + overrides; ConfigError names the key.
-
-    ``scenario`` (or ``sim.scenario``): a scenario file or shipped name whose [[fault]]
-    schedule gives the true faults by sim time; its plant and thrusters are not used.
-    """
-    src = Path(path) if path is not None else shipped_config("vessel.toml")
-    try:
-        data = apply_overrides(tomllib.loads(src.read_text()), overrides)
-    except FileNotFoundError:
-        raise ConfigError(f"config {str(src)!r}: no such file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{src}: {e}") from e
-    where = str(src)
-    plant, ths, B = plant_from_tables(data, where)
-    if not isinstance(plant, SurfaceVessel):
-        raise ConfigError(f"{where}.plant.kind: the simulator runs a vessel, got {plant!r}")
-    sim_table = data.get("sim", {})
-    scenario = scenario or sim_table.get("scenario")
-    schedule = None
-    if scenario is not None:
-        schedule = load_scenario(str(scenario)).faults
-        if schedule.m != ths.m:
-            raise ConfigError(f"scenario {scenario!r}: {schedule.m} thrusters, vessel has {ths.m}")
-    shell = shell_settings_from(sim_table, f"{where}.sim")
-    sim = sim_config_from(data, plant, ths, B, schedule, where)
-    return VesselConfig(shell, sim, data, where)
 
 
 class Recorder:
@@ -117,10 +84,6 @@ class Recorder:
     def write(self, sample: SimSample, monotonic_s: float) -> None:
         self._writer.writerow(record_row(sample, monotonic_s))
         self._fh.flush()
-
-
-class PortError(RuntimeError):
-    """A port could not be opened; the message names the config section."""
 
 
 class VesselPorts:
@@ -393,44 +356,3 @@ class VesselProcess:
             log.warning("t = %.2f s: ESC %s %s", s.t_s, names[i],
                         "silent" if s.silent[i] else "reporting again")  # fmt: skip
         shown["delta"], shown["f"], shown["silent"] = s.delta, s.f, s.silent
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", type=Path, help="vessel TOML (default: the shipped vessel.toml)")
-    p.add_argument("--scenario", help="take the true faults from this scenario (file or name)")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="override a config value (TOML syntax), e.g. --set sim.silent_thrusters=[2]",
-    )
-    p.add_argument("--duration", type=float, help="stop after this many seconds of sim time")
-    p.add_argument("--record", type=Path, help="write the true state and faults to this CSV")
-
-
-def run(args: argparse.Namespace) -> int:
-    if args.duration is not None and not args.duration > 0:
-        log.error("--duration: expected a positive number of seconds, got %s", args.duration)
-        return 2
-    with contextlib.ExitStack() as stack:
-        try:
-            cfg = load_config(args.config, args.set, args.scenario)
-            ports = VesselPorts.open(cfg.raw, cfg.sim.thrusters, cfg.shell.fault_injection_enabled)
-        except ConfigError as e:
-            log.error("configuration error: %s", e)
-            return 2
-        except PortError as e:
-            log.error("%s", e)
-            return 1
-        stack.callback(ports.shutdown)
-        recorder = None
-        if args.record is not None:
-            try:
-                fh = stack.enter_context(open(args.record, "w", newline=""))
-            except OSError as e:
-                log.error("--record: cannot write %s: %s", args.record, e)
-                return 2
-            recorder = Recorder(fh, cfg.sim.thrusters)
-        log.info("simulated vessel running (%s), %d thrusters", cfg.source, cfg.sim.thrusters.m)
-        return VesselProcess(cfg, ports, recorder, args.duration).run()

@@ -10,8 +10,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from ftcap_hil.config.scenario import Scenario, load_scenario
-from ftcap_hil.core.cycle import Mode
+from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import results
 from ftcap_hil.runtime.offline import run_modes
 

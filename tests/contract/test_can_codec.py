@@ -30,7 +30,7 @@ from bridges.can_io.codec import (
     encode_raw_command,
 )
 from bridges.can_io.force_map import RAW_MAX, ForceRawMap, NonFiniteCommand
-from ftcap_hil.core.messages import MalformedMessage
+from ftcap_hil.core.errors import MalformedMessage
 
 RAW_COMMAND_SIGNATURE = 0x217F5C87D7EC951D  # uavcan.equipment.esc.RawCommand, per DSDL
 

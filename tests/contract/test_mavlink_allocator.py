@@ -8,16 +8,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from bridges.mavlink.allocator import (
-    AllocatorLinkConfig,
-    AllocatorStatus,
-    MavlinkAllocatorLink,
-    StatusFlag,
-)
-from bridges.mavlink.codec import SystemStatus, quaternion_from_yaw
+from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
+from bridges.mavlink.codec import StatusFlag, SystemStatus, quaternion_from_yaw, status_from_message
 from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, LinkConfigError, MavlinkEndpoint
 from bridges.mavlink.params import ParamSpec, ParamType
 from ftcap_hil.core.messages import ThrusterCommand
+from ftcap_hil.core.status import AllocatorStatus
 from tests.contract.test_mavlink_support import (
     DIALECT,
     RawPeer,
@@ -262,18 +258,26 @@ def test_thruster_commands_and_status_go_out(pair) -> None:
     assert out.active == 0b1111
     assert out.actuator[:5] == [1.0, -2.0, 0.0, 4.5, 0.0]
     status = AllocatorStatus(
-        np.array([10.0, 0.0, 5.0]),
-        np.array([0.0, 0.0, 1.5]),
-        np.array([1.0, 0.0, 0.5, 1.0]),
-        np.array([0.0, 0.0, 0.0, 3.0]),
-        StatusFlag.FAULT_DETECTED | StatusFlag.UNALLOCATED,
+        tau_demand=(10.0, 0.0, 5.0),
+        unallocated=(0.0, 0.0, 1.5),
+        delta_hat=(1.0, 0.0, 0.5, 1.0),
+        f_hat=(0.0, 0.0, 0.0, 3.0),
+        faulty=(False, True, True, False),
+        saturated=(False, False, False, True),
+        probing=(False, True, False, False),
     )
     assert link.send_status(status)
-    decoded = AllocatorStatus.from_message(gcs.wait_for("FTCAP_STATUS"))
+    msg = gcs.wait_for("FTCAP_STATUS")
+    assert msg.flags == StatusFlag.FAULT_DETECTED | StatusFlag.UNALLOCATED | StatusFlag.SATURATED
+    decoded = status_from_message(msg)
     np.testing.assert_allclose(decoded.delta_hat, status.delta_hat)
     np.testing.assert_allclose(decoded.f_hat, status.f_hat)
-    np.testing.assert_allclose(decoded.tau_unallocated, status.tau_unallocated)
-    assert decoded.flags == StatusFlag.FAULT_DETECTED | StatusFlag.UNALLOCATED
+    np.testing.assert_allclose(decoded.unallocated, status.unallocated)
+    assert (decoded.faulty, decoded.saturated, decoded.probing) == (
+        status.faulty,
+        status.saturated,
+        status.probing,
+    )
     with pytest.raises(ValueError, match="shape"):
         link.send_thruster_commands(ThrusterCommand.checked([1.0, 2.0]))
 

@@ -10,12 +10,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from bridges.mavlink.allocator import (
-    AllocatorLinkConfig,
-    AllocatorStatus,
-    MavlinkAllocatorLink,
-    StatusFlag,
-)
+from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.codec import Severity, SystemStatus, quaternion_from_yaw
 from bridges.mavlink.config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink.gcs import MavlinkGcsLink
@@ -28,6 +23,7 @@ from bridges.mavlink.vessel import (
     MavResult,
 )
 from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry, ThrusterCommand
+from ftcap_hil.core.status import AllocatorStatus
 from tests.contract.test_mavlink_support import (
     DIALECT,
     RawPeer,
@@ -142,8 +138,8 @@ def test_topology_setpoints_telemetry_and_status_flow(topology) -> None:
     allocator.send_thruster_commands(ThrusterCommand.checked([1.0, 2.0, 3.0]))
     allocator.send_status(
         AllocatorStatus(
-            np.array([30.0, -5.0, 12.0]), np.zeros(3), np.array([1.0, 0.2, 1.0]), np.zeros(3),
-            StatusFlag.FAULT_DETECTED,
+            tau_demand=(30.0, -5.0, 12.0), unallocated=(0.0,) * 3, delta_hat=(1.0, 0.2, 1.0),
+            f_hat=(0.0,) * 3, faulty=(False, True, False),
         )
     )  # fmt: skip
     assert wait_until(
@@ -152,7 +148,9 @@ def test_topology_setpoints_telemetry_and_status_flow(topology) -> None:
         )
     )
     np.testing.assert_allclose(gcs.thruster_commands.latest().value.u, [1.0, 2.0, 3.0])
-    np.testing.assert_allclose(gcs.allocator_status.latest().value.delta_hat, [1.0, 0.2, 1.0])
+    got = gcs.allocator_status.latest().value
+    np.testing.assert_allclose(got.delta_hat, [1.0, 0.2, 1.0])
+    assert got.faulty == (False, True, False) and got.fault_detected
     # The vessel's own telemetry never shows up as allocator status and vice versa.
     assert gcs.thruster_commands.malformed == gcs.allocator_status.malformed == 0
 

@@ -20,7 +20,7 @@ from bridges.mavlink.config import (
     default_vessel_endpoint,
 )
 from bridges.mavlink.link import MavlinkPort, Route
-from ftcap_hil.core.messages import MalformedMessage
+from ftcap_hil.core.errors import MalformedMessage
 from tests.contract.test_mavlink_support import RawPeer, free_udp_ports, no_leaked_threads
 
 pytestmark = [pytest.mark.timeout(30)]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import enum
+import dataclasses
 import json
 import math
 import subprocess
@@ -13,7 +13,6 @@ import pytest
 
 from bridges.zenoh_io.codec import (
     MAX_PAYLOAD_BYTES,
-    AllocatorStatus,
     ZenohKeys,
     decode_fault_injection,
     decode_odometry,
@@ -26,33 +25,39 @@ from bridges.zenoh_io.codec import (
     encode_thruster_command,
     encode_wrench_setpoint,
 )
+from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import (
     FaultInjection,
     FaultKind,
-    MalformedMessage,
     Odometry,
     ThrusterCommand,
     WrenchSetpoint,
 )
+from ftcap_hil.core.status import AllocatorStatus, Mode
 
 
 def status_four_thrusters(**changes: object) -> AllocatorStatus:
     values: dict[str, object] = dict(
-        mode="normal",
+        mode=Mode.FTCAP,
         cycle=1200,
         overruns=3,
         degraded=False,
-        delta_hat=np.array([1.0, 0.98, 0.0, 1.0]),
-        f_hat=np.array([0.0, 0.0, 12.5, 0.0]),
-        bf_hat=np.array([12.5, 0.0, -3.0]),
-        u=np.array([100.0, -50.0, 0.0, 25.0]),
-        tau_unallocated=np.array([0.0, 1.5, 0.0]),
+        delta_hat=(1.0, 0.98, 0.0, 1.0),
+        f_hat=(0.0, 0.0, 12.5, 0.0),
+        bf_hat=(12.5, 0.0, -3.0),
+        u=(100.0, -50.0, 0.0, 25.0),
+        tau_demand=(1.0, 2.0, 3.0),
+        unallocated=(0.0, 1.5, 0.0),
         saturated=(False, True, False, False),
-        port_age_s={"setpoint": 0.012, "odometry": math.inf},
-        stale={"setpoint": False, "odometry": True},
+        faulty=(False, False, True, False),
+        setpoint_age_s=0.012,
+        telemetry_stale=True,
+        esc_rpm=(100.0, math.nan, 0.0, -50.0),
+        esc_current_a=(0.5, math.nan, 0.1, 0.2),
+        esc_age_s=(0.01, math.inf, 0.02, 0.03),
     )
     values.update(changes)
-    return AllocatorStatus.from_mapping(values)
+    return AllocatorStatus(**values)  # type: ignore[arg-type]
 
 
 def test_keys_of_a_vessel() -> None:
@@ -119,30 +124,45 @@ def test_fault_injection_round_trip(fault: FaultInjection) -> None:
 def test_status_round_trip_keeps_every_field() -> None:
     status = status_four_thrusters()
     back = decode_status(encode_status(status))
-    for name in ("mode", "cycle", "overruns", "degraded", "saturated", "port_age_s", "stale"):
-        assert getattr(back, name) == getattr(status, name), name
-    for name in ("delta_hat", "f_hat", "bf_hat", "u", "tau_unallocated"):
-        np.testing.assert_array_equal(getattr(back, name), getattr(status, name), err_msg=name)
+    for f in dataclasses.fields(AllocatorStatus):
+        want, got = getattr(status, f.name), getattr(back, f.name)
+        if f.name in ("esc_rpm", "esc_current_a"):
+            np.testing.assert_array_equal(got, want, err_msg=f.name)  # NaN == NaN here
+        else:
+            assert got == want, f.name
 
 
 def test_status_payload_names_wrenches_and_nulls_infinite_ages() -> None:
-    class Mode(enum.Enum):
-        DEGRADED = "degraded"
-
-    obj = json.loads(encode_status(status_four_thrusters(mode=Mode.DEGRADED)))
-    assert obj["mode"] == "degraded"
+    obj = json.loads(encode_status(status_four_thrusters(mode=Mode.CAP)))
+    assert obj["mode"] == "cap"
     assert obj["bf_hat"] == {"X_N": 12.5, "Y_N": 0.0, "N_Nm": -3.0}
-    assert obj["port_age_s"] == {"setpoint": 0.012, "odometry": None}
+    assert obj["port_age_s"] == {
+        "setpoint": 0.012, "telemetry": None, "esc1": 0.01, "esc2": None, "esc3": 0.02,
+        "esc4": 0.03,
+    }  # fmt: skip
     assert obj["f_hat_N"] == [0.0, 0.0, 12.5, 0.0]
+    assert obj["esc_rpm"] == [100.0, None, 0.0, -50.0]
+
+
+def test_a_v1_status_without_the_later_fields_decodes() -> None:
+    obj = json.loads(encode_status(status_four_thrusters()))
+    for key in ("tau_demand", "faulty", "esc_failed", "probing", "malformed", "esc_rpm",
+                "esc_current_A", "estimation_frozen"):  # fmt: skip
+        del obj[key]
+    back = decode_status(json.dumps(obj).encode())
+    assert back.faulty == () and back.tau_demand == () and back.malformed == 0
+    assert back.delta_hat == (1.0, 0.98, 0.0, 1.0)
 
 
 @pytest.mark.parametrize(
     "changes",
     [
-        {"u": np.zeros(3)},
+        {"u": (0.0,) * 3},
         {"saturated": (False,) * 5},
-        {"delta_hat": np.array([1.0, math.nan, 1.0, 1.0])},
-        {"bf_hat": np.zeros(2)},
+        {"faulty": (False,) * 3},
+        {"delta_hat": (1.0, math.nan, 1.0, 1.0)},
+        {"bf_hat": (0.0,) * 2},
+        {"esc_rpm": (1.0,)},
     ],
 )
 def test_status_encoder_refuses_inconsistent_status(changes: dict[str, object]) -> None:
@@ -234,6 +254,8 @@ def test_fault_decoder_refuses(payload: bytes) -> None:
         ("stale", {"setpoint": 1}),
         ("bf_hat", [0.0, 0.0, 0.0]),
         ("mode", 3),
+        ("mode", "normal"),
+        ("faulty", [True]),
     ],
 )
 def test_status_decoder_refuses(field: str, value: object) -> None:

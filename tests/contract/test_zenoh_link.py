@@ -6,6 +6,7 @@ first waits for the publisher to match, then republishes until the sample shows 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import queue
@@ -21,7 +22,6 @@ import numpy as np
 import pytest
 import zenoh
 
-from bridges.zenoh_io.codec import AllocatorStatus
 from bridges.zenoh_io.config import ZenohConfigError
 from bridges.zenoh_io.link import (
     ZenohAllocatorLink,
@@ -36,6 +36,7 @@ from ftcap_hil.core.messages import (
     ThrusterCommand,
     WrenchSetpoint,
 )
+from ftcap_hil.core.status import AllocatorStatus, Mode
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -84,18 +85,18 @@ def wait_until(
 
 def status_with_cycle(cycle: int) -> AllocatorStatus:
     return AllocatorStatus(
-        mode="normal",
+        mode=Mode.FTCAP,
         cycle=cycle,
         overruns=0,
         degraded=False,
-        delta_hat=np.array([1.0, 1.0, 0.5, 1.0]),
-        f_hat=np.zeros(4),
-        bf_hat=np.zeros(3),
-        u=np.array([10.0, 20.0, 30.0, 40.0]),
-        tau_unallocated=np.zeros(3),
+        delta_hat=(1.0, 1.0, 0.5, 1.0),
+        f_hat=(0.0,) * 4,
+        bf_hat=(0.0,) * 3,
+        u=(10.0, 20.0, 30.0, 40.0),
+        unallocated=(0.0,) * 3,
         saturated=(False, False, True, False),
-        port_age_s={"setpoint": 0.01, "odometry": math.inf},
-        stale={"setpoint": False, "odometry": True},
+        setpoint_age_s=0.01,
+        telemetry_stale=True,
     )
 
 
@@ -233,7 +234,7 @@ def test_thruster_commands_and_status_reach_clients(
     got = gcs.status.latest()
     assert got is not None
     assert (got.value.cycle, got.value.saturated) == (41, (False, False, True, False))
-    assert got.value.port_age_s["odometry"] == math.inf
+    assert got.value.telemetry_age_s == math.inf and got.value.telemetry_stale
     assert allocator.publish_errors == 0
 
 
@@ -301,9 +302,9 @@ def test_malformed_payloads_are_counted_and_dropped(
 
 
 def test_bad_status_is_refused_without_raising(allocator: ZenohAllocatorLink) -> None:
-    assert allocator.publish_status({"mode": "normal"}) is False
-    nan_status = status_with_cycle(1)
-    object.__setattr__(nan_status, "delta_hat", np.array([1.0, math.nan, 1.0, 1.0]))
+    short = dataclasses.replace(status_with_cycle(1), u=(1.0,))  # 1 command for 4 thrusters
+    assert allocator.publish_status(short) is False
+    nan_status = dataclasses.replace(status_with_cycle(1), delta_hat=(1.0, math.nan, 1.0, 1.0))
     assert allocator.publish_status(nan_status) is False
     assert allocator.publish_errors == 2
 

@@ -275,8 +275,8 @@ def unknown_set_keys(argv: list[str]) -> list[str]:
     The allocator ignores unknown keys in its [can] and [zenoh] tables, so a misspelt key
     there would run with the default: checked here against the shipped files instead.
     """
-    from ftcap_hil.config.daemon import shipped_config
     from ftcap_hil.config.mission import GCS_KEYS, MISSION_KEYS
+    from ftcap_hil.config.toml import shipped_config
 
     sub = argv[1] if len(argv) > 1 else ""
     known: dict[str, set[str]]

@@ -43,7 +43,8 @@ from bridges.mavlink.gcs import MavlinkGcsLink, wait_until
 from bridges.zenoh_io.link import ZenohGcsLink, make_config
 from ftcap_hil.apps.demo import free_ports
 from ftcap_hil.core.controllers import PoseController
-from ftcap_hil.core.messages import MalformedMessage, Odometry
+from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.messages import Odometry
 from ftcap_hil.core.plants import wrap_angle
 
 ALLOCATOR_NODE = 10

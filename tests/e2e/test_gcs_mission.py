@@ -9,16 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ftcap_hil.config.mission import (
-    FlightRecorder,
-    Injection,
-    injection_plan,
-    limit_wrench,
-    load_mission,
-    shipped_missions,
-)
-from ftcap_hil.core.geometry import ConfigError
+from ftcap_hil.config.mission import load_mission, shipped_missions
+from ftcap_hil.core.controllers import limit_wrench
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.faults import Injection, injection_plan
 from ftcap_hil.core.messages import FaultKind
+from ftcap_hil.report.flight import FlightRecorder
 from ftcap_hil.report.records import column_names
 
 W, B, S, OFF, OK = FaultKind.WEAK, FaultKind.BIAS, FaultKind.STUCK, FaultKind.OFF, FaultKind.OK
@@ -32,7 +28,8 @@ def _rows(plan: list[Injection]) -> list[Row]:
 
 
 def _plan(name: str | Path, *overrides: str) -> list[Row]:
-    return _rows(injection_plan(load_mission(name, list(overrides)).scenario))
+    mission = load_mission(name, list(overrides))
+    return _rows(injection_plan(mission.scenario.faults, mission.duration_s))
 
 
 def test_shipped_missions() -> None:
@@ -117,7 +114,7 @@ class _Status:
 
 def test_flight_record_has_the_simulator_columns_and_truth() -> None:
     mission = load_mission("paper-4.2-ex1", ["mission.duration=20"])
-    rec = FlightRecorder(mission)
+    rec = FlightRecorder(mission.scenario)
     u = np.array([0.05, 0.05, -0.05, -0.05])
     x0 = np.array([0.0, 0.0, 3.1, 0.0, 0.0, 0.0])
     x1 = np.array([0.1, 0.0, -3.1, 0.0, 0.0, 0.0])  # heading crossed +-pi

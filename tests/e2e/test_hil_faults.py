@@ -34,7 +34,7 @@ HOLD_HEADING_RAD = 0.05
 
 def _delta_hat(gcs: MavlinkGcsLink) -> np.ndarray:
     slot = gcs.allocator_status.latest()
-    return np.full(4, np.nan) if slot is None else slot.value.delta_hat
+    return np.full(4, np.nan) if slot is None else np.array(slot.value.delta_hat)
 
 
 def _wait_estimated(

@@ -42,7 +42,7 @@ import pytest
 
 from ftcap_hil.config.scenario import parse_scenario
 from ftcap_hil.core.controllers import PoseController
-from ftcap_hil.core.cycle import Mode
+from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.offline import run_mode
 from tests.e2e.conftest import Rig, latest_odometry, odometry_state, wait_until
 
@@ -126,7 +126,7 @@ def _fly(hil: Rig, onset_s: float, steps: int) -> tuple[np.ndarray, int]:
         x = odometry_state(odom)
         gcs.send_wrench(controller(x, np.zeros(3)).tolist())
         status = gcs.allocator_status.latest()
-        delta_hat = np.ones(4) if status is None else status.value.delta_hat
+        delta_hat = np.ones(4) if status is None else np.array(status.value.delta_hat)
         rows.append([next_t - HIL_START_S, *x[:3], *delta_hat])
         next_t += TS
     time.sleep(0.2)  # the last cycle's status

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from ftcap_hil.core.allocator import AllocationStatus
-from ftcap_hil.core.cycle import CoreConfig, FtcapCore, Mode, Truth
+from ftcap_hil.core.cycle import CoreConfig, FtcapCore
+from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.geometry import command_bounds, effectiveness, paper_four_thrusters
+from ftcap_hil.core.status import Mode
 
 THS = paper_four_thrusters()
 B = effectiveness(THS)

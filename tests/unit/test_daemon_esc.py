@@ -9,6 +9,7 @@ import numpy as np
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.status import Severity
 from ftcap_hil.runtime.daemon import AllocatorDaemon, DaemonConfig, Ports
 
 S = 1_000_000_000  # ns
@@ -32,8 +33,8 @@ class Texts:
     def publish(self, status: object) -> None:
         pass
 
-    def announce(self, text: str, severity: str) -> None:
-        self.got.append((severity, text))
+    def announce(self, text: str, severity: Severity) -> None:
+        self.got.append((severity.value, text))
 
 
 def daemon(ages: dict[str, np.ndarray]) -> tuple[AllocatorDaemon, Texts]:

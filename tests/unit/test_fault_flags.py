@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ftcap_hil.core.cycle import CoreConfig, FtcapCore, Mode, Truth
+from ftcap_hil.core.cycle import CoreConfig, FtcapCore
+from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.status import Mode
 
 
 def _oracle() -> FtcapCore:

@@ -8,13 +8,9 @@ import tomllib
 import numpy as np
 import pytest
 
-from ftcap_hil.core.geometry import (
-    ConfigError,
-    ThrusterSet,
-    effectiveness,
-    paper_four_thrusters,
-    thrusters_from_table,
-)
+from ftcap_hil.config.vessel import thrusters_from_table
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.geometry import ThrusterSet, effectiveness, paper_four_thrusters
 
 S = 0.7071067811865476  # sin(pi/4) = cos(pi/4)
 

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.scenario import load_scenario, parse_scenario, shipped_scenarios
-from ftcap_hil.core.cycle import Mode
-from ftcap_hil.core.geometry import ConfigError, effectiveness
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.geometry import effectiveness
 from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.status import Mode
 from tests.unit.test_geometry import EQ22_L03
 
 BASE = """

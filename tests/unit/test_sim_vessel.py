@@ -11,12 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ftcap_hil.config.scenario import FaultEvent, FaultSchedule
-from ftcap_hil.core.cycle import Truth
-from ftcap_hil.core.geometry import ConfigError, effectiveness, paper_four_thrusters
+from ftcap_hil.config.sim import load_config
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.faults import FaultEvent, FaultSchedule, Truth
+from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.messages import FaultInjection, FaultKind
 from ftcap_hil.core.plants import SurfaceVessel
-from ftcap_hil.runtime.vessel_process import MAX_CATCH_UP_STEPS, VesselProcess, load_config
+from ftcap_hil.runtime.vessel_process import MAX_CATCH_UP_STEPS, VesselProcess
 from sim.esc_model import DEFAULT_ESC, EscModel
 from sim.vessel import (
     Decimator,
@@ -305,9 +306,7 @@ def test_missing_config_file(tmp_path: Path) -> None:
 def test_cli_module_imports_no_transport() -> None:
     """``ftcap-hil`` imports every subcommand module to build its parser: the sim's must not
     pull in the networking stacks (the bridges are imported when the process starts)."""
-    code = (
-        "import json, sys, ftcap_hil.runtime.vessel_process; print(json.dumps(sorted(sys.modules)))"
-    )
+    code = "import json, sys, ftcap_hil.apps.sim; print(json.dumps(sorted(sys.modules)))"
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60
     )

@@ -357,12 +357,12 @@ def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
                     statuses.append({
                         "t_s": st.stamp_ns * 1e-9 - t0,
                         "monotonic_s": st.stamp_ns * 1e-9,
-                        "delta_hat": s.delta_hat.tolist(),
-                        "f_hat": s.f_hat.tolist(),
-                        "tau_demand": s.tau_demand.tolist(),
-                        "tau_unallocated": s.tau_unallocated.tolist(),
-                        "flags": int(s.flags),
-                        "flag_names": str(s.flags),
+                        "delta_hat": list(s.delta_hat),
+                        "f_hat": list(s.f_hat),
+                        "tau_demand": list(s.tau_demand),
+                        "tau_unallocated": list(s.unallocated),
+                        "fault_detected": s.fault_detected,
+                        "faulty": list(s.faulty),
                     })  # fmt: skip
                 for item in gcs.drain_statustexts():
                     texts.append({

@@ -1,0 +1,89 @@
+"""The allocator's MAVLink parameter table (``FTC_*``) and the FTC_MODE codes."""
+
+from __future__ import annotations
+
+from bridges.mavlink.params import ParamSpec, ParamType
+from ftcap_hil.core.cycle import CoreConfig
+from ftcap_hil.core.status import Mode
+
+# Modes a running daemon may switch to, by FTC_MODE value (oracle needs the truth: never).
+MODE_CODES = {0: Mode.NONE, 1: Mode.CAP, 2: Mode.FTCAP, 3: Mode.FTCAP_LITERAL}
+CODE_OF_MODE = {mode: code for code, mode in MODE_CODES.items()}
+
+
+def allocator_param_specs(
+    core: CoreConfig,
+    setpoint_timeout_s: float,
+    telemetry_timeout_s: float,
+    esc_timeout_s: float,
+    rate_hz: float,
+    u_max_n: float,
+) -> list[ParamSpec]:
+    """The tunables exposed over MAVLink. Refused while running, and why:
+    FTC_WINDOW sizes the estimator's buffers (changing it would discard the window),
+    FTC_RATE_HZ fixes the deadlines and the per-cycle rate limits, FTC_UMAX is the
+    hardware's amplitude limit from the vessel file: restart with a new config instead."""
+    c = core
+    mode_code = CODE_OF_MODE[c.mode]
+    inf = float("inf")
+    return [
+        ParamSpec(
+            "FTC_MODE",
+            mode_code,
+            ParamType.INT,
+            0,
+            3,
+            description="0 none, 1 cap, 2 ftcap, 3 ftcap-literal",
+        ),
+        ParamSpec(
+            "FTC_SP_TMO",
+            setpoint_timeout_s,
+            min=0.01,
+            max=60.0,
+            description="setpoint timeout (s) -> zero thrust",
+        ),
+        ParamSpec(
+            "FTC_TLM_TMO",
+            telemetry_timeout_s,
+            min=0.01,
+            max=60.0,
+            description="telemetry timeout (s) -> estimation frozen",
+        ),
+        ParamSpec(
+            "FTC_ESC_TMO",
+            esc_timeout_s,
+            min=0.01,
+            max=60.0,
+            description="ESC silence (s) -> thruster failed",
+        ),
+        ParamSpec("FTC_SLACK_W", c.allocator.slack_weight, min=1e-3, max=1e12),
+        ParamSpec("FTC_EFFORT_W", c.allocator.effort_weight, min=1e-9, max=1e6),
+        ParamSpec("FTC_DEAD_THR", c.allocator.dead_threshold, min=0.0, max=0.99),
+        ParamSpec("FTC_DITHER", c.excitation.dither_amplitude, min=0.0, max=0.5),
+        ParamSpec("FTC_PROBE_INT", c.excitation.probe_interval, ParamType.INT, 0, 1e6),
+        ParamSpec(
+            "FTC_WINDOW",
+            c.estimator.window,
+            ParamType.INT,
+            2,
+            10000,
+            settable_while_running=False,
+            description="estimator window (restart)",
+        ),
+        ParamSpec(
+            "FTC_RATE_HZ",
+            rate_hz,
+            min=0.1,
+            max=2000.0,
+            settable_while_running=False,
+            description="loop rate (restart)",
+        ),
+        ParamSpec(
+            "FTC_UMAX",
+            u_max_n,
+            min=0.0,
+            max=inf,
+            settable_while_running=False,
+            description="thruster limit (vessel file)",
+        ),
+    ]

@@ -1,0 +1,41 @@
+"""The allocator's status on MAVLink: a status sink for the daemon's loop.
+
+Each :meth:`MavlinkStatusSink.publish` (decimated by the daemon) sends HEARTBEAT state
+(STANDBY while the setpoint is stale, ACTIVE while allocating), ACTUATOR_OUTPUT_STATUS (u in
+N), FTCAP_ESC_STATUS (when ESC telemetry is monitored) and FTCAP_STATUS; announcements go out
+as STATUSTEXT with the matching MAV_SEVERITY.
+"""
+
+from __future__ import annotations
+
+from bridges.mavlink.allocator import MavlinkAllocatorLink
+from bridges.mavlink.codec import Severity as MavSeverity
+from bridges.mavlink.codec import SystemStatus
+from ftcap_hil.core.messages import ThrusterCommand
+from ftcap_hil.core.status import AllocatorStatus, Severity
+
+_SEVERITY = {
+    Severity.INFO: MavSeverity.INFO,
+    Severity.WARNING: MavSeverity.WARNING,
+    Severity.ERROR: MavSeverity.ERROR,
+}
+
+
+class MavlinkStatusSink:
+    """Daemon status -> the allocator link's MAVLink messages (module docstring)."""
+
+    def __init__(self, link: MavlinkAllocatorLink) -> None:
+        self._link = link
+
+    def publish(self, st: AllocatorStatus) -> None:
+        """Send one status; the first call ends the link's MAV_STATE_BOOT."""
+        state = SystemStatus.STANDBY if st.setpoint_stale else SystemStatus.ACTIVE
+        self._link.set_system_status(state)
+        self._link.send_thruster_commands(ThrusterCommand.checked(st.u))
+        if st.esc_age_s:
+            self._link.send_esc_status(st.esc_rpm, st.esc_current_a, st.esc_age_s, st.esc_failed)
+        self._link.send_status(st)
+
+    def announce(self, text: str, severity: Severity) -> None:
+        """STATUSTEXT (chunked by the link when longer than 50 characters)."""
+        self._link.send_statustext(text, _SEVERITY[severity])

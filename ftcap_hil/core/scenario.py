@@ -1,0 +1,67 @@
+"""A closed-loop scenario: plant, thrusters, reference, true faults, controller, allocator.
+
+The type only; ``ftcap_hil.config.scenario`` reads it from TOML (docs/scenarios.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ftcap_hil.core.controllers import PoseController, StateFeedback
+from ftcap_hil.core.cycle import CoreConfig
+from ftcap_hil.core.faults import FaultSchedule
+from ftcap_hil.core.geometry import ThrusterSet
+from ftcap_hil.core.messages import FloatArray
+from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.status import Mode
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A value that holds from ``start`` (inclusive) until the next segment."""
+
+    start: float
+    value: FloatArray
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    plant: LinearPlant | SurfaceVessel
+    thrusters: ThrusterSet
+    B: FloatArray  # (k, m)
+    dt_s: float
+    duration_s: float
+    x0: FloatArray
+    controller: StateFeedback | PoseController
+    reference: tuple[Segment, ...]
+    faults: FaultSchedule
+    core: CoreConfig
+    integrator: str = "euler"  # truth: "euler" (= the allocator's model) or "rk4"
+    rk4_substeps: int = 8
+    noise_std: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seed: int = 0
+    time_unit: str = "s"  # "step" for the discrete linear plant
+
+    @property
+    def steps(self) -> int:
+        return int(round(self.duration_s / self.dt_s))
+
+    def reference_at(self, t: float) -> FloatArray:
+        value = self.reference[0].value
+        for seg in self.reference:
+            if seg.start <= t:
+                value = seg.value
+        return value
+
+    def phases(self) -> list[tuple[float, float]]:
+        """Fault phases [start, end) covering the run, split at every fault change."""
+        cuts = [t for t in self.faults.change_times() if 0.0 < t < self.duration_s]
+        bounds = [0.0, *cuts, self.duration_s]
+        return list(zip(bounds[:-1], bounds[1:], strict=True))
+
+    def with_mode(self, mode: Mode) -> Scenario:
+        return replace(self, core=replace(self.core, mode=mode))

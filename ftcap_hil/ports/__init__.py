@@ -1,0 +1,1 @@
+"""The ports layer: what bridges fill and the loop reads (no maths, no transport)."""

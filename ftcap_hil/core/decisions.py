@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ftcap_hil.core.estimator import EstimatorConfig
-from ftcap_hil.core.kalman import FilterOutput
+from ftcap_hil.core.kalman import FilterOutput, inv_small
 from ftcap_hil.core.messages import BoolArray, FloatArray
 
 # chi^2 quantiles at 0.999 for 0..3 degrees of freedom (bias attribution residual).
@@ -155,19 +155,25 @@ class FaultDecider:
             self._base_var = (1.0 - a) ** 2 * self._base_var + a**2 * cov
         delta_b = b - self._base
         sigma = cov + self._base_var + 1e-18 * np.eye(self._k)
-        self._attribute(delta_b, np.asarray(np.linalg.inv(sigma), dtype=np.float64))
+        self._attribute(delta_b, inv_small(sigma))
 
     def _attribute(self, delta_b: FloatArray, w: FloatArray) -> None:
         """Greedy: the thruster whose column explains most of delta_b, then the rest."""
         z, dof = self.config.z_flag, self._k - 1
+        # No single column can explain more than the whole change: below the (hysteresis)
+        # level nothing can be attributed, the common case of healthy operation.
+        need_min = 0.5 * z if self._bias_on.any() else z
+        if float(delta_b @ w @ delta_b) < need_min**2:
+            self._bias_on, self._f = np.zeros(self._m, dtype=bool), np.zeros(self._m)
+            return
         limit = _CHI2_999[min(dof, 3)] if dof > 0 else 0.0
         keep_on = self._bias_on.copy()
         on = np.zeros(self._m, dtype=bool)
         f_all = np.zeros(self._m)
         rest = delta_b.copy()
+        c = self._B
+        cwc = np.einsum("ji,jl,li->i", c, w, c)
         for _ in range(self._m):
-            c = self._B
-            cwc = np.einsum("ji,jl,li->i", c, w, c)
             f = (c.T @ (w @ rest)) / np.maximum(cwc, 1e-300)
             score = np.abs(f) * np.sqrt(cwc)
             need = np.where(keep_on, 0.5 * z, z)  # hysteresis: half the level to stay on

@@ -178,7 +178,8 @@ class WindowedStage:
 
 class KalmanStage:
     """Kalman filter on the measured motion plus statistical decisions (core/kalman.py,
-    core/decisions.py). Needs :class:`Observation` samples."""
+    core/decisions.py). Needs finite :class:`Observation` samples (FtcapCore.step drops
+    the others)."""
 
     def __init__(
         self,
@@ -201,8 +202,6 @@ class KalmanStage:
             return self._out
         if not isinstance(sample, Observation):
             raise ValueError("the Kalman estimator needs an Observation, not a wrench")
-        if not sample.finite():
-            return self._out
         out = self.filter.update(u_sample, sample.x_now, sample.dt_s, sample.x_prev)
         dec = self._decider.update(out, sample.dt_s)
         self._out = StageOutput(out.estimate, dec.delta_alloc, dec.bf_alloc, dec.faulty, dec)

@@ -100,6 +100,7 @@ class ZenohAllocatorLink(ZenohLink):
         self._entities.append(self._session.declare_queryable(k.state, self._answer_state))
 
     def publish_thruster_command(self, cmd: ThrusterCommand) -> bool:
+        """Put u (N) on ``thrusters/command``; False if it cannot be encoded or sent."""
         return self._publish(self.keys.thruster_command, encode_thruster_command, cmd)
 
     def publish_status(self, status: AllocatorStatus) -> bool:
@@ -164,6 +165,7 @@ class ZenohVesselLink(ZenohLink):
         self._declare_publisher(k.odometry, urgent=True)
 
     def publish_odometry(self, odom: Odometry) -> bool:
+        """Put eta (NED), nu (body) and sim time on ``telemetry/odometry``; False on failure."""
         return self._publish(self.keys.odometry, encode_odometry, odom)
 
 
@@ -195,9 +197,11 @@ class ZenohGcsLink(ZenohLink):
         self._declare_publisher(k.fault_inject, reliable=True)
 
     def publish_setpoint(self, setpoint: WrenchSetpoint) -> bool:
+        """Put a body wrench [X (N), Y (N), N (N*m)] on ``setpoint/wrench``; False on failure."""
         return self._publish(self.keys.setpoint_wrench, encode_wrench_setpoint, setpoint)
 
     def inject_fault(self, fault: FaultInjection) -> bool:
+        """Put one fault injection on ``fault/inject`` (reliable); False on failure."""
         return self._publish(self.keys.fault_inject, encode_fault_injection, fault)
 
     def query_state(self, timeout_s: float = 1.0) -> AllocatorStatus | None:

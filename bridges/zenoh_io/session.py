@@ -110,16 +110,19 @@ def _matched(publisher: zenoh.Publisher) -> bool:
 
 
 class _Sink(Protocol[T_contra]):
-    def put(self, value: T_contra, stamp_ns: int | None = None) -> None: ...
-    def count_malformed(self) -> None: ...
+    """Where a subscriber's decoded samples go: a Mailbox or an EventQueue."""
+
+    def put(self, value: T_contra, stamp_ns: int | None = None) -> None:
+        """Take one decoded sample."""
+
+    def count_malformed(self) -> None:
+        """Count one sample that failed to decode."""
 
 
 # --------------------------------------------------------------------------- lifecycle
 
-# A link left open hangs interpreter exit: zenoh-python runs callbacks on non-daemon Python
-# threads that end only when the session closes (zenoh-python #434), and the interpreter joins
-# those threads before running atexit hooks. threading._register_atexit (what
-# concurrent.futures uses) runs before that join; plain atexit is the fallback.
+# Links still open at exit are shut down before the interpreter joins zenoh's non-daemon
+# callback threads, which would otherwise hang it (docs/decisions.md).
 _OPEN_LINKS: weakref.WeakSet[ZenohLink] = weakref.WeakSet()
 
 
@@ -132,7 +135,12 @@ getattr(threading, "_register_atexit", atexit.register)(_shutdown_open_links)
 
 
 class ZenohLink:
-    """Session lifecycle shared by the three links: open, declare, publish, shutdown."""
+    """Session lifecycle shared by the three links: open, declare, publish, shutdown.
+
+    ``vessel``: the key chunk of ``ftcap/<vessel>/...``; ``config``: a zenoh.Config (checked
+    here), or None for the role's shipped JSON5 file. ZenohLinkError if the session cannot be
+    opened, ZenohConfigError if the config is refused.
+    """
 
     _shipped: str = ""
 
@@ -239,6 +247,7 @@ class ZenohLink:
 
     @property
     def closed(self) -> bool:
+        """``shutdown()`` has run."""
         return self._closed
 
     def shutdown(self) -> None:

@@ -36,6 +36,10 @@ from ftcap_hil.core.status import Mode
 
 @dataclass(frozen=True)
 class CoreConfig:
+    """Everything one :class:`FtcapCore` is built from: the mode (:class:`Mode`), the
+    estimator, allocator and excitation settings, and the fault-flag thresholds (fractions
+    of full effectiveness, 0 < fault_threshold <= fault_clear <= 1 in practice)."""
+
     mode: Mode = Mode.FTCAP
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
     allocator: AllocatorConfig = field(default_factory=AllocatorConfig)
@@ -50,6 +54,8 @@ class CoreConfig:
 
 @dataclass(frozen=True)
 class CycleResult:
+    """What one :meth:`FtcapCore.step` produced; per-thruster arrays are (m,)."""
+
     u: FloatArray  # (m,) command to send (N)
     estimate: Estimate
     allocation: Allocation
@@ -59,6 +65,17 @@ class CycleResult:
 
 
 class FtcapCore:
+    """The allocator's cycle (module docstring): fault estimation, excitation, allocation.
+
+    ``B`` (k, m): effectiveness matrix, k = 3 for a surface vessel (tau = [X (N), Y (N),
+    N (N*m)], body frame) or 1 for the linear plant; ``thrusters``: the m thrusters' limits;
+    ``dt_s``: the allocation period (s). The mode picks the estimator: ``FTCAP`` the windowed
+    one, ``FTCAP_LITERAL`` the paper's literal one, ``ORACLE`` the truth handed in to
+    :meth:`step`, ``CAP`` / ``NONE`` none (Delta_hat = I, f_hat = 0). Pure and
+    single-threaded: the caller hands in measurements and times, the core reads no clock.
+    ValueError if ``B`` and ``thrusters`` disagree on m.
+    """
+
     def __init__(
         self, B: FloatArray, thrusters: ThrusterSet, dt_s: float, config: CoreConfig | None = None
     ):
@@ -105,13 +122,15 @@ class FtcapCore:
         dt_s: float | None = None,
         forced_dead: BoolArray | None = None,
     ) -> CycleResult:
-        """One cycle.
+        """One cycle; returns the command to send and what led to it.
 
-        tau_d (k,): demanded wrench. w (k,): actuator wrench measured over the last
+        tau_d (k,): demanded wrench, body frame. w (k,): actuator wrench measured over the last
         estimation interval, or None when there is no new sample (estimates held; the
         excitation does not advance). u_sample (m,): the command that was acting over that
         interval (its time average); defaults to the last command. dt_s: time since the last
-        cycle for the rate limits; defaults to the configured period.
+        cycle for the rate limits; defaults to the configured period. truth: the true faults,
+        needed in ``ORACLE`` mode only (ValueError without). forced_dead (m,): thrusters known
+        failed from outside (a silent ESC): allocated exactly 0, flagged faulty.
         """
         u_sample = self.u_prev if u_sample is None else u_sample
         if w is not None and not math.isfinite(w.sum()):

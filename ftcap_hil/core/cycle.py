@@ -47,6 +47,10 @@ from ftcap_hil.core.status import Mode
 
 @dataclass(frozen=True)
 class CoreConfig:
+    """Everything one :class:`FtcapCore` is built from: the mode (:class:`Mode`), the
+    estimator, allocator and excitation settings, and the fault-flag thresholds (fractions
+    of full effectiveness, 0 < fault_threshold <= fault_clear <= 1 in practice)."""
+
     mode: Mode = Mode.FTCAP
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
     allocator: AllocatorConfig = field(default_factory=AllocatorConfig)
@@ -61,6 +65,8 @@ class CoreConfig:
 
 @dataclass(frozen=True)
 class CycleResult:
+    """What one :meth:`FtcapCore.step` produced; per-thruster arrays are (m,)."""
+
     u: FloatArray  # (m,) command to send (N)
     estimate: Estimate
     allocation: Allocation
@@ -77,11 +83,18 @@ def _finite(sample: Sample) -> bool:
 
 
 class FtcapCore:
-    """One allocator: estimation stage (by mode), excitation, constrained allocation.
+    """The allocator's cycle (module docstring): fault estimation, excitation, allocation.
 
-    B (k, m): effectiveness matrix; thrusters: limits; dt_s: the nominal cycle (for the
-    per-cycle rate limits); plant: the allocator's model of the plant (needed by the
-    Kalman estimator, and to invert :class:`Observation` samples for the windowed one).
+    ``B`` (k, m): effectiveness matrix, k = 3 for a surface vessel (tau = [X (N), Y (N),
+    N (N*m)], body frame) or 1 for the linear plant; ``thrusters``: the m thrusters' limits;
+    ``dt_s``: the allocation period (s). The mode picks the estimation stage
+    (core/estimation.py): ``FTCAP`` the Kalman estimator (or the windowed one with
+    ``estimator.kind = "windowed"``), ``FTCAP_LITERAL`` the paper's literal one,
+    ``ORACLE`` the truth handed in to :meth:`step`, ``CAP`` / ``NONE`` none (Delta_hat = I,
+    f_hat = 0). ``plant``: the allocator's model of the plant, needed by the Kalman
+    estimator and to invert :class:`Observation` samples for the windowed one. Pure and
+    single-threaded: the caller hands in measurements and times, the core reads no clock.
+    ValueError if ``B`` and ``thrusters`` disagree on m.
     """
 
     def __init__(
@@ -147,15 +160,17 @@ class FtcapCore:
         dt_s: float | None = None,
         forced_dead: BoolArray | None = None,
     ) -> CycleResult:
-        """One cycle.
+        """One cycle; returns the command to send and what led to it.
 
-        tau_d (k,): demanded wrench. w: the last estimation interval's sample, an
-        :class:`Observation` (or, for the windowed and literal estimators, the actuator
+        tau_d (k,): demanded wrench, body frame. w: the last estimation interval's sample,
+        an :class:`Observation` (or, for the windowed and literal estimators, the actuator
         wrench (k,) already inverted from it), or None when there is no new sample
         (estimates held; the excitation does not advance). u_sample (m,): the command that
         was acting over that interval (its time average); defaults to the last command.
         dt_s: time since the last cycle for the rate limits; defaults to the configured
-        period. forced_dead (m,): thrusters known failed from outside (silent ESC).
+        period. truth: the true faults, needed in ``ORACLE`` mode only (ValueError without).
+        forced_dead (m,): thrusters known failed from outside (a silent ESC): allocated
+        exactly 0, flagged faulty.
         """
         u_sample = self.u_prev if u_sample is None else u_sample
         if w is not None and not _finite(w):

@@ -26,6 +26,8 @@ from ftcap_hil.core.messages import BoolArray, FloatArray, IntArray
 
 @dataclass(frozen=True)
 class ExcitationConfig:
+    """Dither and probe settings (module docstring); ValueError on construction if invalid."""
+
     dither_amplitude: float = 0.03  # fraction of each thruster's range, largest component
     dither_period: int = 2  # cycles per PRBS level
     probe_amplitude: float = 0.1  # fraction of the range
@@ -49,11 +51,19 @@ class ExcitationConfig:
 
 @dataclass(frozen=True)
 class ExcitationOutput:
+    """One cycle's excitation, per thruster (m,), in N."""
+
     u_pref: FloatArray  # (m,) preferred command (N)
     probe_limit: FloatArray  # (m,) amplitude a probed dead thruster may use (0: not probed)
 
 
 class Excitation:
+    """Null-space dither and recovery probes as a preferred command (module docstring).
+
+    ``B`` (k, m) effectiveness matrix; ``u_range`` (m,) each thruster's range in N
+    (max(|u_min|, |u_max|)), which the amplitudes are fractions of. Call once per cycle.
+    """
+
     def __init__(self, B: FloatArray, u_range: FloatArray, config: ExcitationConfig | None = None):
         self.config = config or ExcitationConfig()
         self._B = np.asarray(B, dtype=np.float64)

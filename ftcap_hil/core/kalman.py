@@ -403,7 +403,7 @@ class KalmanEstimator:
         """Which thrusters may have changed: a generalized likelihood ratio per single
         thruster hypothesis over the evidence since the detector left 0 (mean innovation
         along G B_i u_i), Lambda_i = (sum h^T S^-1 e)^2 / sum h^T S^-1 h. Suspects: every
-        thruster within ``isolation_margin`` of the best one (1.5: about the chi^2_1 78 % level;
+        thruster within ``isolation_margin`` of the best one (2.71: chi^2_1 at 90 %;
         a missed suspect is caught by the next alarm, a needless one only dips for a while)."""
         m = self._m
         a, c = np.zeros(m), np.zeros(m)

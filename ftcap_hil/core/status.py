@@ -16,6 +16,8 @@ from dataclasses import dataclass, fields
 
 
 class Mode(enum.Enum):
+    """How the allocator core treats faults (its estimator, or none); values as in config."""
+
     NONE = "none"  # reference run: no faults injected, allocator as CAP
     CAP = "cap"  # allocation without estimation (Delta_hat = I, f_hat = 0)
     FTCAP = "ftcap"  # windowed joint estimation (default)
@@ -24,6 +26,7 @@ class Mode(enum.Enum):
 
     @property
     def estimates(self) -> bool:
+        """The mode runs a fault estimator."""
         return self in (Mode.FTCAP, Mode.FTCAP_LITERAL)
 
 

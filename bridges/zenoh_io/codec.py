@@ -285,7 +285,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
     delta_hat = _finite_list("delta_hat", s.delta_hat)
     m = len(delta_hat)
     flags = {name: _flags(name, getattr(s, name), m) for name in _FLAG_FIELDS}
-    if any(len(v) not in (0, m) for v in (s.esc_rpm, s.esc_current_a, s.esc_age_s)):
+    if any(len(v) not in (0, m) for v in (s.esc_rpm, s.esc_current_a, s.esc_age_s, s.delta_std)):
         raise MalformedMessage(f"esc telemetry: expected {m} entries per field")
     ages = {"setpoint": s.setpoint_age_s, "telemetry": s.telemetry_age_s}
     ages |= {f"esc{i + 1}": a for i, a in enumerate(s.esc_age_s)}
@@ -296,6 +296,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
         "degraded": bool(s.degraded),
         "estimation_frozen": bool(s.estimation_frozen),
         "delta_hat": delta_hat,
+        "delta_std": _finite_list("delta_std", s.delta_std) if s.delta_std else [],
         "f_hat_N": _finite_list("f_hat", s.f_hat, m),
         "bf_hat": _wrench_obj("bf_hat", s.bf_hat),
         "u_N": _finite_list("u", s.u, m),
@@ -311,7 +312,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
     return _dump({"v": VERSION, **body})
 
 
-_FLAG_FIELDS = ("saturated", "faulty", "esc_failed", "probing")
+_FLAG_FIELDS = ("saturated", "faulty", "esc_failed", "probing", "observable")
 
 
 def _flags(name: str, value: tuple[bool, ...], m: int) -> list[bool]:
@@ -348,6 +349,7 @@ def decode_status(payload: bytes | str) -> AllocatorStatus:
         if "estimation_frozen" in obj
         else False,
         delta_hat=tuple(delta_hat.tolist()),
+        delta_std=tuple(_vector(obj, "delta_std").tolist()) if obj.get("delta_std") else (),
         f_hat=tuple(_vector(obj, "f_hat_N", m).tolist()),
         bf_hat=tuple(_wrench(obj, "bf_hat").tolist()),
         u=tuple(_vector(obj, "u_N", m).tolist()),

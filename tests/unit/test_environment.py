@@ -176,3 +176,13 @@ def test_bad_levels_are_refused() -> None:
         EnvironmentConfig(waves=WaveConfig(hs_m=1.0, tp_s=0.0))
     with pytest.raises(ValueError, match="a_front_m2"):
         Environment(EnvironmentConfig(wind=WindConfig(speed_m_s=5.0)), HullGeometry(10, 3, 1))
+
+
+def test_the_force_factor_scales_each_axis() -> None:
+    x = np.array([5.0, 1.0, 0.3, 0.0, 0.0, 0.0])
+    plain = Environment(EnvironmentConfig(waves=SEA), HULL, seed=2)
+    factored = WaveConfig(hs_m=SEA.hs_m, tp_s=SEA.tp_s, direction_rad=SEA.direction_rad,
+                          force_factor=(2.0, 1.0, 0.5))  # fmt: skip
+    env = Environment(EnvironmentConfig(waves=factored), HULL, seed=2)
+    t = np.linspace(0.0, 100.0, 11)
+    np.testing.assert_allclose(env.wave_wrench(t, x), plain.wave_wrench(t, x) * [2.0, 1.0, 0.5])

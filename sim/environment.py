@@ -308,11 +308,44 @@ class WaveComponents:
         return out
 
     def wrench(self, t_s: float | FloatArray, x: FloatArray, hull: HullGeometry) -> FloatArray:
-        """First-order (Froude-Krylov) body wrench (..., 3) at heading x[2]."""
-        f = froude_krylov(self.k_rad_m, self.direction_rad - float(x[2]), hull)
-        f = f * self.amplitude_m[:, None] * np.asarray(self.force_factor)
-        out: FloatArray = np.real(np.exp(1j * self.phases(t_s, x)) @ f)
-        return out
+        """First-order (Froude-Krylov) body wrench (..., 3) at heading x[2]:
+        Re{a_i F_i e^{i theta_i}} summed, in real arithmetic (F_x, F_y are imaginary and N
+        is real for the box, ``froude_krylov``), twice as fast as the complex form."""
+        gx, gy, gn = self._transfer(self.direction_rad - float(x[2]), hull)
+        theta = self.phases(t_s, x)
+        sin = np.sin(theta)
+        return np.stack([-(sin @ gx), -(sin @ gy), np.cos(theta) @ gn], axis=-1)
+
+    def _transfer(
+        self, chi_rad: float, hull: HullGeometry
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Im F_x, Im F_y, Re N of ``froude_krylov`` times amplitude and force_factor."""
+        k, length, beam = self.k_rad_m, hull.l_oa_m, hull.beam_m
+        ax, ay = 0.5 * length * k * math.cos(chi_rad), 0.5 * beam * k * math.sin(chi_rad)
+        sx, sy, cx, cy = np.sin(ax), np.sin(ay), np.cos(ax), np.cos(ay)
+        scale = (2.0 * hull.block_coefficient * hull.rho_water_kg_m3 * G_M_S2) * self.amplitude_m
+        scale = scale * -np.expm1(-k * hull.draft_m) / k
+        fx, fy, fn = self.force_factor
+        gx = fx * scale * beam * _ratio(sy, ay) * sx
+        gy = fy * scale * length * _ratio(sx, ax) * sy
+        gn = -fn * scale * (_moment(sx, cx, ax, length) * sy - _moment(sy, cy, ay, beam) * sx)
+        return gx, gy, gn
+
+
+def _ratio(sin_a: FloatArray, a: FloatArray) -> FloatArray:
+    """sin(a) / a, 1 at a = 0."""
+    small = np.abs(a) < 1e-8
+    out: FloatArray = np.where(small, 1.0, sin_a / np.where(small, 1.0, a))
+    return out
+
+
+def _moment(sin_a: FloatArray, cos_a: FloatArray, a: FloatArray, length: float) -> FloatArray:
+    """dI0/dq at q = 2 a / l: l^2 (cos a - sin a / a) / (2 a), -l^2 a / 6 near a = 0."""
+    small = np.abs(a) < 1e-4
+    safe = np.where(small, 1.0, a)
+    exact = length**2 * (cos_a - sin_a / safe) / (2.0 * safe)
+    out: FloatArray = np.where(small, -(length**2) * a / 6.0, exact)
+    return out
 
 
 @dataclass(frozen=True)

@@ -186,3 +186,16 @@ def test_the_force_factor_scales_each_axis() -> None:
     env = Environment(EnvironmentConfig(waves=factored), HULL, seed=2)
     t = np.linspace(0.0, 100.0, 11)
     np.testing.assert_allclose(env.wave_wrench(t, x), plain.wave_wrench(t, x) * [2.0, 1.0, 0.5])
+
+
+@pytest.mark.parametrize("psi_deg", [0.0, 30.0, 90.0, -120.0, 180.0])
+def test_the_real_arithmetic_wave_wrench_equals_the_complex_form(psi_deg: float) -> None:
+    env = Environment(EnvironmentConfig(waves=SEA), HULL, seed=9)
+    waves = env.waves
+    assert waves is not None
+    x = np.array([12.0, -7.0, math.radians(psi_deg), 0.0, 0.0, 0.0])
+    t = np.linspace(0.0, 60.0, 7)
+    f = froude_krylov(waves.k_rad_m, waves.direction_rad - x[2], HULL) * waves.amplitude_m[:, None]
+    expected = np.real(np.exp(1j * waves.phases(t, x)) @ f)
+    got = env.wave_wrench(t, x)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9 * np.abs(expected).max())

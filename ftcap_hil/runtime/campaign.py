@@ -180,6 +180,17 @@ class ResultStore:
                 done.add(task.key)
         return done
 
+    def drop_partial_line(self) -> None:
+        """Cut a last line without its newline (a write stopped midway) so that appended
+        rows start on a line of their own."""
+        if not self.path.exists():
+            return
+        data = self.path.read_bytes()
+        if data and not data.endswith(b"\n"):
+            log.warning("%s: dropping an incomplete last line (interrupted write)", self.path)
+            with open(self.path, "r+b") as fh:
+                fh.truncate(data.rfind(b"\n") + 1)
+
     def append(self, row: dict[str, Any]) -> None:
         with open(self.path, "a") as fh:
             fh.write(json.dumps(row, allow_nan=False) + "\n")
@@ -276,6 +287,7 @@ def run_campaign(
         logging.getLogger("distributed").setLevel(logging.WARNING)
 
     store = ResultStore(out_dir)
+    store.drop_partial_line()
     done = store.done(plan.tasks, retry_failed)
     todo = {t.key for t in plan.tasks} - done
     written: list[dict[str, Any]] = []

@@ -6,7 +6,8 @@ DIR/faults.csv (and .parquet when pyarrow is installed), distribution plots, and
 DIR/replay/ the scenario file of every run (runs.csv gives the `ftcap-hil simulate` command
 that reproduces each). By default the runs go to an embedded Dask LocalCluster on
 127.0.0.1 with one worker process per core; --scheduler uses an existing cluster.
-Exit code 1 when some run failed (it is recorded, with its error, in the summary).
+Exit code 1 when some run failed (it is recorded, with its error, in the summary), 130
+when interrupted (what finished is kept).
 """
 
 from __future__ import annotations
@@ -74,6 +75,10 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as e:
         print(f"ftcap-hil campaign: {e}", file=sys.stderr)
         return int(ExitCode.CONFIG)
+    except KeyboardInterrupt:
+        print(f"ftcap-hil campaign: interrupted; run it again to resume ({args.out})",
+              file=sys.stderr)  # fmt: skip
+        return int(ExitCode.INTERRUPTED)
     wall = time.perf_counter() - started
     keys = {t.key for t in plan.tasks}
     rows = [r for r in ResultStore(args.out.resolve()).rows() if r["key"] in keys]

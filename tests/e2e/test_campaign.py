@@ -232,6 +232,19 @@ def test_an_interrupted_campaign_resumes_with_only_what_is_missing(
     assert retry.stdout.startswith("5 runs now"), retry.stdout  # only the failed ones
 
 
+def test_the_shipped_smoke_campaign(tmp_path: Path) -> None:
+    """What CI runs of the campaign as shipped: every run succeeds, every kind reported."""
+    done = _campaign(Path("smoke"), tmp_path, "--workers", "2")
+    assert done.returncode == 0, done.stdout + done.stderr
+    rows = _rows(tmp_path)
+    assert len(rows) == 26 and all(r["status"] == "ok" for r in rows.values())
+    oracle = [f for r in rows.values() if r["variant"] == "oracle" for f in r["faults"]]
+    assert oracle and all(f["isolation_delay_s"] == 0.0 for f in oracle)
+    summary = (tmp_path / "summary.md").read_text()
+    for kind in ("dead", "partial", "intermittent", "healthy"):
+        assert f"| ftcap | {kind} |" in summary, kind
+
+
 def test_a_changed_campaign_does_not_reuse_stale_results(
     spec: Path, embedded: Path, tmp_path: Path
 ) -> None:

@@ -2,12 +2,15 @@
 
 Definitions (docs/campaigns.md gives them with their rationale). Cycle k has time t_k and
 period T_s; per thruster i: the true effectiveness delta_i and bias f_i, the estimate
-delta_hat_i, the core's flag ``faulty_i`` (F) and ``dead_i`` (R: delta_hat_i < the
-allocator's dead threshold). Thruster i is *healthy* at k when delta_i = 1 and f_i = 0.
+delta_hat_i, the core's flag ``faulty_i`` (F) and ``dead_i`` (R: taken out of the
+allocation, the effectiveness the allocator used below its dead threshold).
 
-* A *fault episode* is a maximal run of cycles in which a thruster is not healthy; it is
-  *detectable* when its delta drops below the core's fault threshold; the detection
-  reference t_d is the first such cycle.
+* A *fault episode* is a maximal run of cycles in which a thruster's truth is not nominal
+  (delta_i != 1 or f_i != 0); it is *detectable* when its delta drops below the core's
+  fault threshold; the detection reference t_d is the first such cycle.
+* Thruster i is *healthy* at k when its truth is nominal and it is not *recovering*
+  (between the end of an episode and the cycle from which its flag and its removal both
+  stay off for ``recovery_hold_s``: that time is the recovery's, below).
 * Detection / removal delay: first cycle >= t_d with F_i / R_i, minus t_d. Isolation delay:
   first cycle >= t_d at which i is flagged or removed and no healthy thruster is.
 * Correct isolation: isolated in at least ``isolation_hold`` of the episode's tail (its
@@ -138,17 +141,28 @@ def _rms(x: FloatArray) -> float | None:
     return _num(float(np.sqrt(np.mean(x**2)))) if x.size else None
 
 
+def _next_starts(eps: list[Episode], n: int) -> list[int]:
+    """Per episode: where its thruster's next episode starts (n: none)."""
+    return [
+        min((e.start for e in eps if e.thruster == ep.thruster and e.start >= ep.end), default=n)
+        for ep in eps
+    ]
+
+
 class _Run:
     """The arrays one record's metrics are computed from."""
 
-    def __init__(self, rec: RunRecord, ref: Reference | None) -> None:
+    def __init__(
+        self, rec: RunRecord, ref: Reference | None, eps: list[Episode], p: MetricParams
+    ) -> None:
         sc = rec.scenario
         self.rec, self.t, self.dt = rec, rec.t, sc.dt_s
         self.delta, self.f = _stack(rec, "delta"), _stack(rec, "f")
         self.dh, self.fh = _stack(rec, "delta_hat"), _stack(rec, "f_hat")
         self.flag = _stack(rec, "faulty") > 0.5
         self.dead = _stack(rec, "dead") > 0.5
-        self.healthy = (self.delta == 1.0) & (self.f == 0.0)
+        self.hold = max(1, int(round(p.recovery_hold_s / self.dt)))
+        self.healthy = (self.delta == 1.0) & (self.f == 0.0) & ~self._recovering(eps)
         self.u_range = np.maximum(np.abs(sc.thrusters.u_min), np.abs(sc.thrusters.u_max))
         self.threshold = sc.core.fault_threshold
         out = self.flag | self.dead
@@ -156,6 +170,22 @@ class _Run:
         n = self.t.size if ref is None else min(self.t.size, ref.pos.shape[0])
         self.ref = ref
         self.dev = None if ref is None else np.linalg.norm(positions(rec)[:n] - ref.pos[:n], axis=1)
+
+    def back(self, mask: BoolArray, ep: Episode, limit: int) -> int | None:
+        """First cycle after the episode from which ``mask`` (flag or removal) of its
+        thruster stays off for the recovery hold, before ``limit``."""
+        return first_held(~mask[:, ep.thruster], ep.end, limit, self.hold)
+
+    def _recovering(self, eps: list[Episode]) -> BoolArray:
+        """Cycles between a fault's end and its thruster's recovery (flag and removal both
+        off for the hold): neither fault nor healthy operation."""
+        out = np.zeros_like(self.flag)
+        for ep, limit in zip(eps, _next_starts(eps, self.t.size), strict=True):
+            if ep.end < self.t.size:
+                ends = (self.back(self.dead, ep, limit), self.back(self.flag, ep, limit))
+                until = limit if None in ends else max(e for e in ends if e is not None)
+                out[ep.end : until, ep.thruster] = True
+        return out
 
     def delay(self, mask: BoolArray, a: int, b: int) -> float | None:
         hit = np.flatnonzero(mask[a:b])
@@ -172,10 +202,8 @@ class _Run:
 def _recovery(r: _Run, ep: Episode, limit: int, p: MetricParams) -> dict[str, Any]:
     if ep.end >= r.t.size:
         return {"ended": False, "recovery_s": None, "recovery_unflag_s": None}
-    hold = max(1, int(round(p.recovery_hold_s / r.dt)))
-    i, t_end = ep.thruster, r.t[ep.end]
-    back = first_held(~r.dead[:, i], ep.end, limit, hold)
-    clear = first_held(~r.flag[:, i], ep.end, limit, hold)
+    t_end = r.t[ep.end]
+    back, clear = r.back(r.dead, ep, limit), r.back(r.flag, ep, limit)
     return {
         "ended": True,
         "recovery_s": None if back is None else float(r.t[back] - t_end),
@@ -264,14 +292,12 @@ def run_metrics(
 ) -> dict[str, Any]:
     """The metrics of one run: scalars, ``phases`` (deviation per fault phase) and
     ``faults`` (one row per episode). ref: the fault-free run (None: no deviation)."""
-    r = _Run(rec, ref)
+    eps = episodes(rec, kinds)
+    r = _Run(rec, ref, eps, params)
     k = rec.scenario.B.shape[0]
     gap = _stack_k(rec, "v_dem", k) - _stack_k(rec, "v_ach", k)
-    eps = episodes(rec, kinds)
-    rows = []
-    for ep in eps:
-        later = [e.start for e in eps if e.thruster == ep.thruster and e.start >= ep.end]
-        rows.append(fault_metrics(r, ep, min(later, default=r.t.size), params))
+    limits = _next_starts(eps, r.t.size)
+    rows = [fault_metrics(r, ep, lim, params) for ep, lim in zip(eps, limits, strict=True)]
     return {
         "cycles": int(r.t.size),
         "deviation_rms": None if r.dev is None else _rms(r.dev),

@@ -53,7 +53,8 @@ def column_names(sc: Scenario) -> list[str]:
 def flag_names(sc: Scenario) -> list[str]:
     """Per-thruster decision columns the offline recorder appends after ``column_names``:
     ``faulty_i`` (the core's fault flag, CoreConfig.fault_threshold / fault_clear) and
-    ``dead_i`` (removed from the allocation: delta_hat < allocator.dead_threshold); 0 or 1."""
+    ``dead_i`` (taken out of the allocation: the effectiveness the allocator used was below
+    allocator.dead_threshold, ``Allocation.dead``); 0 or 1."""
     m = sc.thrusters.m
     return [f"faulty_{i}" for i in range(1, m + 1)] + [f"dead_{i}" for i in range(1, m + 1)]
 
@@ -102,7 +103,7 @@ class Recorder:
                     solve_s * 1e6,
                 ],
                 res.faulty,
-                est.delta_hat < self.sc.core.allocator.dead_threshold,
+                res.allocation.dead,
             ]
         )
         self.rows.append(row)

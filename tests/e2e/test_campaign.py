@@ -237,7 +237,7 @@ def test_the_shipped_smoke_campaign(tmp_path: Path) -> None:
     done = _campaign(Path("smoke"), tmp_path, "--workers", "2")
     assert done.returncode == 0, done.stdout + done.stderr
     rows = _rows(tmp_path)
-    assert len(rows) == 26 and all(r["status"] == "ok" for r in rows.values())
+    assert len(rows) == 33 and all(r["status"] == "ok" for r in rows.values())
     oracle = [f for r in rows.values() if r["variant"] == "oracle" for f in r["faults"]]
     assert oracle and all(f["isolation_delay_s"] == 0.0 for f in oracle)
     summary = (tmp_path / "summary.md").read_text()

@@ -154,9 +154,23 @@ def test_recovery_after_an_intermittent_fault_ends() -> None:
     assert fault["end_s"] == pytest.approx(20.0)
     assert fault["recovery_s"] == pytest.approx(3.0)
     assert fault["recovery_unflag_s"] == pytest.approx(5.0)
-    # after the end thruster 2 is healthy again: the flag until 25 s is healthy time flagged
-    assert out["healthy_flagged_s"] == pytest.approx(5.0)
-    assert out["false_alarms"] == 0  # the flag rose while the thruster was faulty
+    # until 25 s thruster 2 is recovering: neither faulty nor healthy time
+    assert out["healthy_hours"] == pytest.approx((4 * 60.0 - 10.0 - 5.0) / 4 / 3600)
+    assert out["healthy_flagged_s"] == 0.0 and out["false_alarms"] == 0
+    rec.set("faulty_2", 40.0, 41.0, 1.0)  # once recovered, a flag is a false alarm again
+    out = run_metrics(rec.record(), None, PARAMS, kinds={1: "intermittent"})
+    assert out["false_alarms"] == 1 and out["healthy_flagged_s"] == pytest.approx(1.0)
+
+
+def test_a_thruster_that_never_recovers_is_never_healthy_again() -> None:
+    rec = Synthetic(60.0)
+    rec.set("delta_2", 10.0, 20.0, 0.0)
+    rec.set("dead_2", 10.5, math.inf, 1.0)
+    rec.set("faulty_1", 30.0, 31.0, 1.0)  # another thruster's false alarm still counts
+    out = run_metrics(rec.record(), None, PARAMS)
+    assert out["faults"][0]["recovery_s"] is None
+    assert out["healthy_removed_s"] == 0.0 and out["false_alarms"] == 1
+    assert out["healthy_hours"] == pytest.approx((4 * 60.0 - 50.0) / 4 / 3600)
 
 
 def test_deviation_from_the_reference_and_the_used_test() -> None:

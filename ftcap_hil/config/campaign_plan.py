@@ -159,57 +159,45 @@ def _with(doc: dict[str, Any], seed: int, faults: list[dict[str, Any]] | None) -
     return out
 
 
-def _entry_cases(entry: ScenarioEntry, spec: CampaignSpec) -> list[Case]:
-    doc = _read(entry, spec)
-    where = f"{spec.source}: scenario {entry.label}"
-    sc = parse_scenario(doc, where)
-    length = _length(sc, entry.length_m)
+def _random_cases(
+    entry: ScenarioEntry, spec: CampaignSpec, doc: dict[str, Any], sc: Scenario, seed: int
+) -> list[Case]:
+    """The cases of one seed with generated faults: one per kind, or one drawing the kind."""
     u_range = np.maximum(np.abs(sc.thrusters.u_min), np.abs(sc.thrusters.u_max))
+    length = _length(sc, entry.length_m)
+    cases = []
+    for kind in spec.faults.kinds if spec.faults.each_kind else (None,):
+        salt = [seed, zlib.crc32(entry.label.encode()), zlib.crc32((kind or "").encode())]
+        try:
+            rng = np.random.default_rng(salt)
+            gen = random_faults(rng, u_range, sc.duration_s, spec.faults, kind)
+        except ValueError as e:
+            raise ConfigError(f"{spec.source}: scenario {entry.label}: {e}") from e
+        kinds = {g.thruster: g.kind for g in gen}
+        tables = [t for g in gen for t in g.tables]
+        name = f"{entry.label}/s{seed}" + (f"/{kind}" if kind else "")
+        cases.append(Case(name, entry.label, seed, False, _run_kind(kinds),
+                          _with(doc, seed, tables), tuple(kinds.items()), length))  # fmt: skip
+    return cases
+
+
+def _entry_cases(entry: ScenarioEntry, spec: CampaignSpec) -> list[Case]:
+    """The cases of one ``[[scenario]]``: per seed, its faults as the entry says."""
+    doc = _read(entry, spec)
+    sc = parse_scenario(doc, f"{spec.source}: scenario {entry.label}")
+    length = _length(sc, entry.length_m)
+    kinds = schedule_kinds(sc)
     cases = []
     for seed in spec.seeds:
         name = f"{entry.label}/s{seed}"
         if entry.faults == "scenario":
-            kinds = schedule_kinds(sc)
-            cases.append(
-                Case(
-                    name,
-                    entry.label,
-                    seed,
-                    False,
-                    _run_kind(kinds),
-                    _with(doc, seed, None),
-                    tuple(kinds.items()),
-                    length,
-                )
-            )
+            cases.append(Case(name, entry.label, seed, False, _run_kind(kinds),
+                              _with(doc, seed, None), tuple(kinds.items()), length))  # fmt: skip
         elif entry.faults == "none":
-            cases.append(
-                Case(name, entry.label, seed, True, "healthy", _with(doc, seed, []), (), length)
-            )
+            healthy = _with(doc, seed, [])
+            cases.append(Case(name, entry.label, seed, True, "healthy", healthy, (), length))
         else:
-            draws = spec.faults.kinds if spec.faults.each_kind else (None,)
-            for kind in draws:
-                salt = [seed, zlib.crc32(entry.label.encode()), zlib.crc32((kind or "").encode())]
-                try:
-                    gen = random_faults(
-                        np.random.default_rng(salt), u_range, sc.duration_s, spec.faults, kind
-                    )
-                except ValueError as e:
-                    raise ConfigError(f"{where}: {e}") from e
-                kinds = {g.thruster: g.kind for g in gen}
-                tables = [t for g in gen for t in g.tables]
-                cases.append(
-                    Case(
-                        name + (f"/{kind}" if kind else ""),
-                        entry.label,
-                        seed,
-                        False,
-                        _run_kind(kinds),
-                        _with(doc, seed, tables),
-                        tuple(kinds.items()),
-                        length,
-                    )
-                )
+            cases += _random_cases(entry, spec, doc, sc, seed)
     return cases
 
 

@@ -163,7 +163,7 @@ def test_replay_files_are_the_runs_scenarios(tmp_path: Path) -> None:
         path = Path(task.replay.split()[2])
         assert f"--mode {task.mode.value}" in task.replay
         sc = load_scenario(tmp_path / path.name).with_mode(task.mode)
-        assert sc.faults == task.scenario.faults or _same_faults(sc, task.scenario)
+        assert _same_faults(sc, task.scenario)
         assert sc.core == task.scenario.core and sc.seed == task.seed
         assert sc.duration_s == task.scenario.duration_s
 
@@ -243,3 +243,16 @@ def test_too_many_faults_for_the_vessel_is_a_config_error(tmp_path: Path) -> Non
     data = deep_merge(tomllib.loads(SMALL), {"faults": {"count": 5}})
     with pytest.raises(ConfigError, match="count = 5"):
         plan_campaign(parse_campaign(data, "small.toml"), tmp_path)
+
+
+def test_scenario_faults_keep_the_files_schedule_and_none_removes_it(tmp_path: Path) -> None:
+    text = SMALL.replace('faults = "random"', 'faults = "scenario"\nduration = 300.0')
+    text += '\n[[scenario]]\nsource = "paper-4.2-ex1"\nlabel = "calm"\nfaults = "none"\n'
+    plan, _ = plan_campaign(_parse(text), tmp_path)
+    paper = next(t for t in plan.tasks if t.case == "paper/s3" and t.variant == "ftcap")
+    # eqs. (27)-(28): thruster 1 at 0.9 with a bias, then 0.8; thruster 3 stuck at 0.01
+    assert dict(paper.fault_kinds) == {0: "mixed", 2: "stuck"} and paper.kind == "multi"
+    assert _same_faults(paper.scenario, load_scenario("paper-4.2-ex1"))
+    calm = [t for t in plan.tasks if t.label == "calm"]
+    assert calm and all(t.healthy and not t.scenario.faults.events for t in calm)
+    assert {t.variant for t in calm} == {"none", "ftcap", "ftcap-prefilter"}

@@ -323,3 +323,37 @@ def test_the_help_does_not_import_dask() -> None:
         check=False,
     )
     assert helped.returncode == 0 and "--scheduler" in helped.stdout
+
+
+def test_a_worker_that_dies_is_a_recorded_failure_and_the_campaign_goes_on(
+    spec: Path, tmp_path: Path
+) -> None:
+    """A task whose worker process dies (here: it exits) is retried by Dask on a restarted
+    worker and, when that dies too, recorded as failed; the next runs still complete."""
+    import dask
+    from distributed import Client
+
+    from ftcap_hil.config.campaign import load_campaign
+    from ftcap_hil.config.campaign_plan import plan_campaign
+    from ftcap_hil.runtime.campaign import (
+        ReferenceResult,
+        _completed,
+        embedded_cluster,
+        execute_reference,
+    )
+
+    plan, _ = plan_campaign(load_campaign(spec), tmp_path)
+    ref_task = plan.tasks[0]
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        cluster = embedded_cluster(1)
+    try:
+        with Client(cluster) as client:
+            doomed = client.submit(os._exit, 3, key="doomed", retries=1)
+            rows = list(_completed(client, {doomed: plan.tasks[1]}))
+            assert rows[0]["status"] == "failed" and rows[0]["key"] == plan.tasks[1].key
+            assert rows[0]["error"].startswith("dask: KilledWorker"), rows[0]["error"]
+            after = client.submit(execute_reference, ref_task, plan.params, key="after")
+            result = after.result(timeout=120)
+            assert isinstance(result, ReferenceResult) and result.row["status"] == "ok"
+    finally:
+        cluster.close()

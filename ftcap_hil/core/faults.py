@@ -35,8 +35,8 @@ def _no_flags() -> BoolArray:
 class Truth:
     """The faults actually acting (for the oracle, for metrics and for the thruster bank).
 
-    ``delta`` (m,) effectiveness, ``f`` (m,) bias in N, ``stuck`` (m,) bool: the thruster
-    holds its onset output (all False when not given)."""
+    ``delta`` (m,) effectiveness in [0, 1], ``f`` (m,) bias force per thruster in N,
+    ``stuck`` (m,) bool: the thruster holds its onset output (all False when not given)."""
 
     delta: FloatArray
     f: FloatArray
@@ -140,13 +140,14 @@ def _blend(old: FloatArray, target: FloatArray | float, w: float) -> FloatArray:
 
 @dataclass(frozen=True)
 class FaultSchedule:
-    """The faults of ``m`` thrusters over time, as a sequence of :class:`FaultEvent`."""
+    """The true faults of ``m`` thrusters over time: ``events`` in order, later ones win."""
 
     m: int
     events: tuple[FaultEvent, ...] = ()
 
     def at(self, t: float) -> Truth:
-        """The (delta, f, stuck) acting at time ``t`` (s), each (m,)."""
+        """The (delta, f, stuck) acting at time ``t`` (s, or steps for a discrete plant),
+        each (m,)."""
         delta, f = np.ones(self.m), np.zeros(self.m)
         stuck = np.zeros(self.m, dtype=bool)
         for ev in self.events:
@@ -163,8 +164,8 @@ class FaultSchedule:
         return Truth(delta, f, stuck)
 
     def change_times(self) -> list[float]:
-        """Sorted times (s) at which the truth changes or, for a ramp, starts or stops
-        changing; between two of them a ramp moves linearly, everything else is constant."""
+        """Sorted times at which the truth changes or, for a ramp, starts or stops changing
+        (finite ones only); between two of them a ramp moves linearly, all else is constant."""
         return sorted({t for ev in self.events for t in ev.edges()})
 
 

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import math
+import tomllib
 
 import numpy as np
 import pytest
 
+from ftcap_hil.config.scenario import parse_scenario
+from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import (
     EventKind,
     FaultEvent,
@@ -237,3 +240,94 @@ def test_random_changing_one_range_changes_no_other_draw() -> None:
 def test_random_bad_spec(kw: dict[str, object]) -> None:
     with pytest.raises(ValueError, match="random faults"):
         RandomFaultSpec(**kw)  # type: ignore[arg-type]
+
+
+# --- scenario files: the [[fault]] profile keys ---
+
+HEAD = """
+[scenario]
+name = "unit"
+dt = 0.5
+duration = 60.0
+[plant]
+kind = "vessel"
+[vessel]
+preset = "paper-4.2"
+[[reference]]
+from = 0.0
+value = [0.0, 0.0, 0.0]
+"""
+
+
+def parse_faults(text: str) -> FaultSchedule:
+    return parse_scenario(tomllib.loads(HEAD + text), "unit.toml").faults
+
+
+def test_scenario_file_profile_keys() -> None:
+    sched = parse_faults(
+        """
+[[fault]]
+from = 10.0
+thruster = 1
+kind = "ramp"
+ramp_s = 10.0
+delta = 0.4
+[[fault]]
+from = 5.0
+until = 25.0
+thruster = 2
+kind = "intermittent"
+on_s = 2.0
+off_s = 3.0
+delta = 0.0
+[[fault]]
+from = 30.0
+until = 40.0
+thruster = 3
+kind = "stuck"
+[[fault]]
+from = 1.0
+thruster = 4
+kind = "bias"
+bias = -0.01
+"""
+    )
+    assert [ev.kind for ev in sched.events] == [
+        EventKind.RAMP, EventKind.INTERMITTENT, EventKind.STUCK, EventKind.BIAS,
+    ]  # fmt: skip
+    assert sched.at(15.0).delta[0] == pytest.approx(0.7)
+    assert sched.at(6.0).delta[1] == 0.0 and sched.at(8.0).delta[1] == 1.0
+    assert sched.at(35.0).stuck.tolist() == [False, False, True, False]
+    assert sched.at(2.0).f[3] == -0.01
+
+
+def test_scenario_without_kind_is_a_step() -> None:
+    sched = parse_faults("[[fault]]\nfrom = 1.0\nthruster = 1\ndelta = 0.3\n")
+    assert sched.events[0].kind is EventKind.STEP and sched.at(2.0).delta[0] == 0.3
+
+
+@pytest.mark.parametrize(
+    ("entry", "pattern"),
+    [
+        ('kind = "ramps"\ndelta = 0.5', r"unit.toml.fault\[0\].kind: 'ramps' not one of"),
+        ('kind = "ramp"\ndelta = 0.5', r"fault\[0\].ramp_s: missing"),
+        ("ramp_s = 3.0\ndelta = 0.5", r"fault\[0\].ramp_s: only for kind = 'ramp'"),
+        (
+            'kind = "ramp"\non_s = 1.0\nramp_s = 2.0',
+            r"fault\[0\].on_s: only for kind = 'intermittent'",
+        ),
+        (
+            'kind = "intermittent"\non_s = 1.0\noff_s = 1.0\ndelta = 0.0',
+            r"fault\[0\]: .*finite end",
+        ),
+        ('kind = "stuck"\ndelta = 0.0', r"fault\[0\]: stuck fault: takes no delta"),
+        (
+            'kind = "ramp"\nramp_s = -1.0\ndelta = 0.5',
+            r"fault\[0\]: ramp fault: ramp_s must be > 0",
+        ),
+        ("until = 0.5\ndelta = 0.5", r"fault\[0\]: .*start < end"),
+    ],
+)
+def test_scenario_profile_key_errors(entry: str, pattern: str) -> None:
+    with pytest.raises(ConfigError, match=pattern):
+        parse_faults(f"[[fault]]\nfrom = 1.0\nthruster = 1\n{entry}\n")

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ftcap_hil.core.faults import Truth
-from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray
+from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, IntArray
 
 RAW_MAX = 8191  # esc.RawCommand int14, kept symmetric: [-8191, 8191]
 
@@ -152,7 +152,7 @@ class ThrusterBankConfig:
 def quantise(u: FloatArray, u_max_abs: FloatArray) -> FloatArray:
     """(m,) forces in N -> the nearest of the 16383 int14 levels over +-u_max_abs (N),
     clipped at the ends; rounding half-to-even, error at most u_max_abs / 16382."""
-    raw = np.clip(np.rint(u * (RAW_MAX / u_max_abs)), -RAW_MAX, RAW_MAX)
+    raw = np.minimum(np.maximum(np.rint(u * (RAW_MAX / u_max_abs)), -RAW_MAX), RAW_MAX)
     return np.asarray(raw * (u_max_abs / RAW_MAX))
 
 
@@ -178,19 +178,38 @@ class Signature:
         return np.asarray(self.k_q * self.speed**2)
 
 
+_CODE = {kind: i for i, kind in enumerate(ThrusterFault)}
+_KINDS = list(ThrusterFault)
+_HEALTHY, _WEAK, _FOULED, _LOST, _STUCK, _DEAD = (_CODE[k] for k in ThrusterFault)
+
+
+def _cause_codes(truth: Truth, causes: Sequence[ThrusterFault] | None) -> IntArray:
+    """(m,) integer codes of :func:`causes_for` (vectorised: this runs every step)."""
+    if causes is None:
+        d = truth.delta
+        base = np.where(d <= 0.0, _DEAD, np.where(d < 1.0, _WEAK, _HEALTHY))
+    else:
+        base = np.array([_CODE[c] for c in causes])
+    return np.asarray(np.where(truth.stuck, _STUCK, base))
+
+
 def causes_for(truth: Truth, causes: Sequence[ThrusterFault] | None = None) -> list[ThrusterFault]:
     """Each thruster's cause: STUCK where ``truth.stuck``; else the given cause; else, with
     none given, DEAD_ESC at delta = 0, WEAK_MOTOR at 0 < delta < 1, HEALTHY at delta = 1."""
-    out: list[ThrusterFault] = []
-    for i, (d, stuck) in enumerate(zip(truth.delta.tolist(), truth.stuck.tolist(), strict=True)):
-        if stuck:
-            out.append(ThrusterFault.STUCK)
-        elif causes is not None:
-            out.append(causes[i])
-        else:
-            weak = ThrusterFault.WEAK_MOTOR if d < 1.0 else ThrusterFault.HEALTHY
-            out.append(ThrusterFault.DEAD_ESC if d <= 0.0 else weak)
-    return out
+    return [_KINDS[i] for i in _cause_codes(truth, causes).tolist()]
+
+
+def _signature(
+    code: IntArray, delta: FloatArray, fouled_torque_gain: float, dead_esc: DeadEsc
+) -> Signature:
+    d = np.minimum(np.maximum(delta, 0.0), 1.0)
+    fouled, lost, dead = code == _FOULED, code == _LOST, code == _DEAD
+    at_speed = fouled | lost
+    speed = np.where(dead, 0.0, np.where(at_speed, 1.0, np.sqrt(d)))
+    k_q = np.where(fouled, 1.0 + fouled_torque_gain * (1.0 - d), np.where(lost, d, 1.0))
+    responds = ~dead & (code != _STUCK)
+    reports = ~dead | (dead_esc is DeadEsc.ZERO)
+    return Signature(speed, np.where(at_speed, d, 1.0), k_q, responds, reports)
 
 
 def signature(
@@ -198,18 +217,8 @@ def signature(
     dead_esc: DeadEsc = DeadEsc.SILENT,
 ) -> Signature:  # fmt: skip
     """The (s, k_T, k_Q, responds, reports) of each thruster (module docstring), (m,) each."""
-    kind = np.array([c.value for c in causes])
-    d = np.clip(np.asarray(delta, dtype=np.float64), 0.0, 1.0)
-    at_speed = np.isin(kind, [ThrusterFault.FOULED.value, ThrusterFault.LOST_BLADE.value])
-    dead = kind == ThrusterFault.DEAD_ESC.value
-    speed = np.where(dead, 0.0, np.where(at_speed, 1.0, np.sqrt(d)))
-    k_t = np.where(at_speed, d, 1.0)
-    fouled = 1.0 + fouled_torque_gain * (1.0 - d)
-    k_q = np.select([kind == ThrusterFault.FOULED.value, kind == ThrusterFault.LOST_BLADE.value],
-                    [fouled, d], 1.0)  # fmt: skip
-    responds = ~dead & (kind != ThrusterFault.STUCK.value)
-    reports = ~dead | (dead_esc is DeadEsc.ZERO)
-    return Signature(speed, k_t, k_q, responds, reports)
+    code = np.array([_CODE[c] for c in causes])
+    return _signature(code, np.asarray(delta, dtype=np.float64), fouled_torque_gain, dead_esc)
 
 
 @dataclass(frozen=True)
@@ -233,7 +242,24 @@ class ThrusterBank:
         self.config = config
         self._h = np.zeros(m) if h0 is None else np.array(h0, dtype=np.float64).reshape(m)
         props = config.propellers
-        self._p = {k: np.array([getattr(p, k) for p in props]) for k in vars(props[0])}
+        p = {k: np.array([getattr(pr, k) for pr in props]) for k in vars(props[0])}
+        self._thrust_k = p["k_t"] * p["rho_kgm3"] * p["diameter_m"] ** 4  # T / n^2, N s^2
+        self._torque_k = p["k_q"] * p["rho_kgm3"] * p["diameter_m"] ** 5  # Q / n^2
+        self._watts_per_amp = p["efficiency"] * p["voltage_v"]
+        self._idle_a, self._voltage_v = p["idle_a"], p["voltage_v"]
+        self._lag_dt_s = math.nan
+        self._lag = (np.zeros(m), np.zeros(m))
+
+    def _lag_factors(self, dt_s: float) -> tuple[FloatArray, FloatArray]:
+        """(a, b): H_end = c + (H0 - c) a and H_mean = c + (H0 - c) b over a step of dt_s;
+        both 0 without lag. Kept for the last dt_s (the step is usually fixed)."""
+        if dt_s != self._lag_dt_s:
+            tc = self.config.time_constant_s
+            lagged = tc > 0.0
+            a = np.where(lagged, np.exp(-dt_s / np.where(lagged, tc, 1.0)), 0.0)
+            self._lag = (a, np.where(lagged, tc / dt_s * (1.0 - a), 0.0))
+            self._lag_dt_s = dt_s
+        return self._lag
 
     @property
     def m(self) -> int:
@@ -264,34 +290,28 @@ class ThrusterBank:
         if not (math.isfinite(dt_s) and dt_s > 0.0):
             raise ValueError(f"dt_s: expected a finite positive step, got {dt_s}")
         cfg = self.config
-        sig = signature(causes_for(truth, causes), truth.delta, cfg.fouled_torque_gain,
-                        cfg.dead_esc)  # fmt: skip
+        code = _cause_codes(truth, causes)
+        sig = _signature(code, truth.delta, cfg.fouled_torque_gain, cfg.dead_esc)
         c = np.where(sig.responds | truth.stuck, self.target(u), 0.0)
-        tc, h0 = cfg.time_constant_s, self._h
-        lagged = tc > 0.0
-        ratio = np.where(lagged, tc, 1.0) / dt_s
-        a = np.where(lagged, np.exp(-1.0 / np.where(lagged, ratio, 1.0)), 0.0)
-        end = np.where(lagged, c + (h0 - c) * a, c)
-        mean = np.where(lagged, c + (h0 - c) * ratio * (1.0 - a), c)
-        end, mean = np.where(truth.stuck, h0, end), np.where(truth.stuck, h0, mean)
+        a, b = self._lag_factors(dt_s)
+        h0 = self._h
+        end = np.where(truth.stuck, h0, c + (h0 - c) * a)
+        mean = np.where(truth.stuck, h0, c + (h0 - c) * b)
         self._h = end
         rpm, current = self._telemetry(end, sig)
         return BankOutput(
             truth.delta * end + truth.f, truth.delta * mean + truth.f, c, rpm, current,
-            sig.reports, self._p["voltage_v"].copy(),
+            sig.reports, self._voltage_v.copy(),
         )  # fmt: skip
 
     def _telemetry(self, h: FloatArray, sig: Signature) -> tuple[FloatArray, FloatArray]:
         """(rpm, current in A) of shafts at healthy thrust ``h`` with signature ``sig``."""
-        p, cfg = self._p, self.config
+        cfg = self.config
         gain = np.where(h >= 0.0, cfg.forward_gain, cfg.reverse_gain)
-        n_cmd = np.sign(h) * np.sqrt(
-            np.abs(h) / (gain * p["k_t"] * p["rho_kgm3"] * p["diameter_m"] ** 4)
-        )
-        n = sig.speed * n_cmd
-        torque = sig.k_q * p["k_q"] * p["rho_kgm3"] * p["diameter_m"] ** 5 * n**2
-        current = 2.0 * math.pi * np.abs(n) * torque / (p["efficiency"] * p["voltage_v"])
-        return 60.0 * n, current + p["idle_a"]
+        n = sig.speed * np.sign(h) * np.sqrt(np.abs(h) / (gain * self._thrust_k))
+        torque = sig.k_q * self._torque_k * n**2
+        current = 2.0 * math.pi * np.abs(n) * torque / self._watts_per_amp
+        return 60.0 * n, current + self._idle_a
 
 
 def esc_statuses(out: BankOutput) -> list[EscStatus]:

@@ -48,6 +48,10 @@ def test_lag_is_exact_whatever_the_step() -> None:
     fine = run(one(time_constant_s=0.3), 0.08, 0.001, 600)
     assert coarse == pytest.approx(0.08 * (1 - math.exp(-2)), rel=1e-12)
     assert fine == pytest.approx(coarse, rel=1e-9)
+    mixed = one(time_constant_s=0.3)
+    for dt in (0.1, 0.2, 0.05, 0.25):  # the step may change between calls
+        out = mixed.step(np.array([0.08]), HEALTHY, dt)
+    assert out.produced[0] == pytest.approx(coarse, rel=1e-12)
 
 
 def test_lag_mean_over_a_step_is_the_integral() -> None:

@@ -83,6 +83,7 @@ class CanThrusterSink(CanSender):
         return self.send_raw(self.force_map.to_raw(u))
 
     def send_zero(self) -> bool:
+        """Command zero force on every thruster (raw 0); False if the bus refused it."""
         return self.send_raw(np.zeros(self.force_map.m, dtype=np.int64))
 
     def send_raw(self, raw: Sequence[int] | np.ndarray) -> bool:

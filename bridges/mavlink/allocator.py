@@ -8,9 +8,9 @@ In (dispatch thread -> mailboxes; invalid input is counted in the mailbox and dr
   ``wrench_limit`` counts as malformed.
 * ``MANUAL_CONTROL`` -> ``manual: Mailbox[WrenchSetpoint]``, tau = [x, y, r] / 1000 *
   ``max_wrench``. x > 0 is surge ahead, y > 0 sway to starboard, r > 0 yaw to starboard
-  (clockwise from above): common.xml words r the other way round, but PX4, ArduPilot and
-  QGroundControl all use r > 0 for yaw right, so we follow them. An axis equal to INT16_MAX
-  ("invalid") contributes 0; any other value outside [-1000, 1000] drops the message.
+  (clockwise from above), as PX4, ArduPilot and QGroundControl read it (docs/decisions.md).
+  An axis equal to INT16_MAX ("invalid") contributes 0; any other value outside
+  [-1000, 1000] drops the message.
   Manual and automatic setpoints get separate mailboxes: the daemon decides who wins.
 * ``PARAM_*``: the parameter protocol on the table given to the constructor
   (:mod:`bridges.mavlink.params`).
@@ -239,7 +239,9 @@ class MavlinkAllocatorLink(PortOwner):
         return self._port.send(lambda mav: mav.ftcap_esc_status_send(*fields))
 
     def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
+        """STATUSTEXT (chunked beyond 50 characters); False on a transport error."""
         return self._port.send_statustext(text, severity)
 
     def set_system_status(self, status: SystemStatus) -> None:
+        """MAV_STATE reported by the HEARTBEAT from now on (a change is sent at once)."""
         self._port.set_system_status(status)

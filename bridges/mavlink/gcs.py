@@ -54,6 +54,8 @@ _STARTING = (SystemStatus.UNINIT, SystemStatus.BOOT)
 
 @dataclass(frozen=True)
 class Heartbeat:
+    """One HEARTBEAT's MAV_TYPE, MAV_AUTOPILOT and MAV_STATE (``system_status``)."""
+
     mav_type: int
     autopilot: int
     system_status: int
@@ -61,6 +63,8 @@ class Heartbeat:
 
 @dataclass(frozen=True)
 class StatusText:
+    """One STATUSTEXT (chunks reassembled) and the (system, component) that sent it."""
+
     system: int
     component: int
     severity: Severity
@@ -204,6 +208,7 @@ class MavlinkGcsLink(PortOwner):
             return {name: entry[0] for name, entry in self._params.get(ids, {}).items()}
 
     def wait_heartbeat(self, ids: Ids, timeout_s: float = 3.0) -> bool:
+        """Block until a HEARTBEAT from ``ids`` has been heard (True) or ``timeout_s`` passes."""
         with self._cond:
             return self._cond.wait_for(lambda: ids in self._heartbeats, timeout_s)
 
@@ -274,6 +279,7 @@ class MavlinkGcsLink(PortOwner):
         return None
 
     def request_params(self, ids: Ids) -> bool:
+        """PARAM_REQUEST_LIST to ``ids``, not waiting (the answers reach :meth:`params_of`)."""
         return self._port.send(lambda mav: mav.param_request_list_send(ids[0], ids[1]))
 
     def fetch_params(self, ids: Ids, timeout_s: float = 2.0) -> dict[str, float]:
@@ -307,6 +313,7 @@ class MavlinkGcsLink(PortOwner):
         return None
 
     def drain_statustexts(self) -> list[Stamped[StatusText]]:
+        """Every STATUSTEXT received since the last drain, oldest first."""
         out: list[Stamped[StatusText]] = []
         while True:
             try:

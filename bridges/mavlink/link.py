@@ -149,16 +149,20 @@ class MavlinkPort:
 
     @property
     def system_id(self) -> int:
+        """Our MAVLink system id."""
         return self.endpoint.system_id
 
     @property
     def component_id(self) -> int:
+        """Our MAVLink component id."""
         return self.endpoint.component_id
 
     def time_boot_ms(self) -> int:
+        """Milliseconds since this port opened, wrapped to uint32 (MAVLink ``time_boot_ms``)."""
         return ((time.monotonic_ns() - self._t0_ns) // 1_000_000) & 0xFFFFFFFF
 
     def time_boot_us(self) -> int:
+        """Microseconds since this port opened (MAVLink ``time_usec`` when no other clock)."""
         return (time.monotonic_ns() - self._t0_ns) // 1_000
 
     def addressed_to_me(self, target_system: int, target_component: int | None = None) -> bool:
@@ -199,6 +203,7 @@ class MavlinkPort:
                 self._heartbeat.next_ns = 0
 
     def send_heartbeat(self) -> bool:
+        """One HEARTBEAT now with the current status (the dispatch thread sends them at 1 Hz)."""
         hb = self._heartbeat
         with hb.lock:
             status = int(hb.status)
@@ -335,6 +340,7 @@ class PortOwner:
         return self._port.is_alive
 
     def shutdown(self) -> None:
+        """Stop the port's dispatch thread and close its connection. Idempotent."""
         self._port.shutdown()
 
     def __enter__(self) -> Self:

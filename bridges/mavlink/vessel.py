@@ -89,6 +89,9 @@ FAILURE_TYPE_OF: dict[FaultKind, FailureType] = {k: t for t, k in FAULT_KIND_OF.
 
 @dataclass(frozen=True)
 class InjectDecision:
+    """How to answer one MAV_CMD_INJECT_FAILURE: the result, the faults to apply if
+    ACCEPTED, and the reason if not."""
+
     result: MavResult
     faults: tuple[FaultInjection, ...] = ()
     reason: str = ""
@@ -226,4 +229,5 @@ class MavlinkVesselLink(PortOwner):
         return self.faults.drain()
 
     def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
+        """STATUSTEXT (chunked beyond 50 characters); False on a transport error."""
         return self._port.send_statustext(text, severity)

@@ -2,11 +2,8 @@
 
 Encoding: one UTF-8 JSON object per sample, SI units spelled in the field names, and a version
 field ``"v": 1``. JSON rather than a fixed binary struct: any Zenoh tool can read a payload
-(``z_sub``) or send one by hand (``z_put``), and the thruster count m varies. What it costs
-against the 2 ms setpoint -> CAN budget, from ``bench/zenoh_latency.py`` on the 2-core dev VM:
-a setpoint encode + decode takes about 13 us warm, against 4-7 us for a ``<B3d`` struct.
-After a 5 ms idle gap (caches cold, as in a paced loop) the figures are 130-160 us for JSON
-and 85-125 us for the struct. The bare loopback Zenoh hop has a median of 100-220 us.
+(``z_sub``) or send one by hand (``z_put``), and the thruster count m varies (its cost against
+the latency budget: docs/decisions.md).
 
 Rules shared by every payload:
 
@@ -208,20 +205,24 @@ def _wrench(obj: Mapping[str, Any], key: str | None = None) -> FloatArray:
 
 
 def encode_wrench_setpoint(msg: WrenchSetpoint) -> bytes:
+    """``setpoint/wrench`` payload; MalformedMessage for a non-finite wrench."""
     return _dump({"v": VERSION, **_wrench_obj("wrench", msg.tau)})
 
 
 def decode_wrench_setpoint(payload: bytes | str) -> WrenchSetpoint:
+    """The wrench of a ``setpoint/wrench`` payload; MalformedMessage if invalid."""
     return WrenchSetpoint(_wrench(_load(payload)))
 
 
 def encode_odometry(msg: Odometry) -> bytes:
+    """``telemetry/odometry`` payload (NaN ``time_s`` as null); MalformedMessage if not finite."""
     eta = dict(zip(_ETA_FIELDS, _finite_list("eta", msg.eta, 3), strict=True))
     nu = dict(zip(_NU_FIELDS, _finite_list("nu", msg.nu, 3), strict=True))
     return _dump({"v": VERSION, **eta, **nu, "time_s": _optional_float(msg.time_s)})
 
 
 def decode_odometry(payload: bytes | str) -> Odometry:
+    """eta, nu and time_s (NaN if null or absent) of a payload; MalformedMessage if invalid."""
     obj = _load(payload)
     eta = np.array([_number(obj, k) for k in _ETA_FIELDS], dtype=np.float64)
     nu = np.array([_number(obj, k) for k in _NU_FIELDS], dtype=np.float64)
@@ -230,6 +231,7 @@ def decode_odometry(payload: bytes | str) -> Odometry:
 
 
 def encode_thruster_command(msg: ThrusterCommand) -> bytes:
+    """``thrusters/command`` payload (u in N); MalformedMessage for a non-finite force."""
     return _dump({"v": VERSION, "u_N": _finite_list("u_N", msg.u)})
 
 
@@ -249,6 +251,7 @@ def _check_fault(index: int, kind: FaultKind, value: float, m: int | None) -> No
 
 
 def encode_fault_injection(msg: FaultInjection) -> bytes:
+    """``fault/inject`` payload (NaN value as null); MalformedMessage for a bad index/value."""
     if isinstance(msg.index, bool) or not isinstance(msg.index, int) or msg.index < 0:
         raise MalformedMessage(f"index: expected an integer >= 0, got {msg.index!r}")
     if math.isinf(msg.value):
@@ -282,7 +285,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
     delta_hat = _finite_list("delta_hat", s.delta_hat)
     m = len(delta_hat)
     flags = {name: _flags(name, getattr(s, name), m) for name in _FLAG_FIELDS}
-    if any(len(v) not in (0, m) for v in (s.esc_rpm, s.esc_current_a, s.esc_age_s)):
+    if any(len(v) not in (0, m) for v in (s.esc_rpm, s.esc_current_a, s.esc_age_s, s.delta_std)):
         raise MalformedMessage(f"esc telemetry: expected {m} entries per field")
     ages = {"setpoint": s.setpoint_age_s, "telemetry": s.telemetry_age_s}
     ages |= {f"esc{i + 1}": a for i, a in enumerate(s.esc_age_s)}
@@ -293,6 +296,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
         "degraded": bool(s.degraded),
         "estimation_frozen": bool(s.estimation_frozen),
         "delta_hat": delta_hat,
+        "delta_std": _finite_list("delta_std", s.delta_std) if s.delta_std else [],
         "f_hat_N": _finite_list("f_hat", s.f_hat, m),
         "bf_hat": _wrench_obj("bf_hat", s.bf_hat),
         "u_N": _finite_list("u", s.u, m),
@@ -308,7 +312,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
     return _dump({"v": VERSION, **body})
 
 
-_FLAG_FIELDS = ("saturated", "faulty", "esc_failed", "probing")
+_FLAG_FIELDS = ("saturated", "faulty", "esc_failed", "probing", "observable")
 
 
 def _flags(name: str, value: tuple[bool, ...], m: int) -> list[bool]:
@@ -345,6 +349,7 @@ def decode_status(payload: bytes | str) -> AllocatorStatus:
         if "estimation_frozen" in obj
         else False,
         delta_hat=tuple(delta_hat.tolist()),
+        delta_std=tuple(_vector(obj, "delta_std").tolist()) if obj.get("delta_std") else (),
         f_hat=tuple(_vector(obj, "f_hat_N", m).tolist()),
         bf_hat=tuple(_wrench(obj, "bf_hat").tolist()),
         u=tuple(_vector(obj, "u_N", m).tolist()),

@@ -21,9 +21,11 @@ class StateFeedback:
 
     @property
     def k_r(self) -> float:
+        """Reference gain K_r (unit DC gain from r to x)."""
         return 1.0 / (self.b_v / (1.0 - self.a - self.b_v * self.gain))
 
     def __call__(self, x: FloatArray, ref: FloatArray) -> FloatArray:
+        """v (1,) from the state x (1,) and the reference r (1,)."""
         return np.array([self.gain * x[0] + self.k_r * ref[0]])
 
 
@@ -36,6 +38,8 @@ class PoseController:
     k_eta: float = 0.63
 
     def __call__(self, x: FloatArray, ref: FloatArray) -> FloatArray:
+        """v (3,) body wrench [X (N), Y (N), N (N*m)] from x = [eta (3, NED), nu (3, body)]
+        and the pose reference eta_d (3,) = [north (m), east (m), psi (rad)]."""
         eta, nu = x[:3], x[3:6]
         err = np.asarray(ref, dtype=np.float64) - eta
         err[2] = float(wrap_angle(err[2]))

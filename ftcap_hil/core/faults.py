@@ -19,7 +19,8 @@ from ftcap_hil.core.messages import FaultKind, FloatArray
 
 @dataclass(frozen=True)
 class Truth:
-    """The faults actually acting (for the oracle and for metrics)."""
+    """The faults actually acting (for the oracle and for metrics): ``delta`` (m,)
+    effectiveness in [0, 1], ``f`` (m,) bias force per thruster in N."""
 
     delta: FloatArray
     f: FloatArray
@@ -39,10 +40,13 @@ class FaultEvent:
 
 @dataclass(frozen=True)
 class FaultSchedule:
+    """The true faults of ``m`` thrusters over time: ``events`` in order, later ones win."""
+
     m: int
     events: tuple[FaultEvent, ...] = ()
 
     def at(self, t: float) -> Truth:
+        """The faults acting at time ``t`` (s, or steps for a discrete plant)."""
         delta, f = np.ones(self.m), np.zeros(self.m)
         for ev in self.events:
             if not ev.start <= t < ev.end:
@@ -55,6 +59,7 @@ class FaultSchedule:
         return Truth(delta, f)
 
     def change_times(self) -> list[float]:
+        """Every time at which some fault starts or ends, sorted (finite ends only)."""
         times = {ev.start for ev in self.events} | {
             ev.end for ev in self.events if math.isfinite(ev.end)
         }

@@ -48,6 +48,7 @@ class WrenchSetpoint:
 
     @classmethod
     def checked(cls, tau: object) -> WrenchSetpoint:
+        """Validate ``tau`` (3 finite numbers) or raise MalformedMessage."""
         return cls(_finite_vector("wrench", tau, 3))
 
 
@@ -61,6 +62,7 @@ class Odometry:
 
     @classmethod
     def checked(cls, eta: object, nu: object, time_s: float = math.nan) -> Odometry:
+        """Validate ``eta`` and ``nu`` (3 finite numbers each) or raise MalformedMessage."""
         return cls(_finite_vector("eta", eta, 3), _finite_vector("nu", nu, 3), float(time_s))
 
 
@@ -72,6 +74,7 @@ class ThrusterCommand:
 
     @classmethod
     def checked(cls, u: object, m: int | None = None) -> ThrusterCommand:
+        """Validate ``u`` (finite, length ``m`` if given) or raise MalformedMessage."""
         return cls(_finite_vector("thruster command", u, m))
 
 

@@ -28,6 +28,14 @@ class Segment:
 
 @dataclass(frozen=True)
 class Scenario:
+    """One offline closed-loop run (docs/scenarios.md): the plant (linear, state x (1,), or
+    the surface vessel, x = [eta (3, NED), nu (3, body)]), its thrusters and B (k, m), the
+    step ``dt_s`` and ``duration_s`` (s; steps when ``time_unit`` is "step"), the initial
+    state ``x0``, the nominal controller and its piecewise-constant reference, the true
+    faults, the allocator core's settings, the truth's integrator and the state noise
+    (``noise_std``, per state component, with ``seed``).
+    """
+
     name: str
     description: str
     plant: LinearPlant | SurfaceVessel
@@ -48,9 +56,11 @@ class Scenario:
 
     @property
     def steps(self) -> int:
+        """Number of steps of the run."""
         return int(round(self.duration_s / self.dt_s))
 
     def reference_at(self, t: float) -> FloatArray:
+        """The reference in force at ``t``: the last segment that started at or before it."""
         value = self.reference[0].value
         for seg in self.reference:
             if seg.start <= t:
@@ -64,4 +74,5 @@ class Scenario:
         return list(zip(bounds[:-1], bounds[1:], strict=True))
 
     def with_mode(self, mode: Mode) -> Scenario:
+        """The same scenario with the allocator core in ``mode``."""
         return replace(self, core=replace(self.core, mode=mode))

@@ -211,7 +211,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
     delta_hat = finite_list("delta_hat", s.delta_hat)
     m = len(delta_hat)
     flags = {name: _flags(name, getattr(s, name), m) for name in _FLAG_FIELDS}
-    if any(len(v) not in (0, m) for v in (s.esc_rpm, s.esc_current_a, s.esc_age_s)):
+    if any(len(v) not in (0, m) for v in (s.esc_rpm, s.esc_current_a, s.esc_age_s, s.delta_std)):
         raise MalformedMessage(f"esc telemetry: expected {m} entries per field")
     ages = {"setpoint": s.setpoint_age_s, "telemetry": s.telemetry_age_s}
     ages |= {f"esc{i + 1}": a for i, a in enumerate(s.esc_age_s)}
@@ -222,6 +222,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
         "degraded": bool(s.degraded),
         "estimation_frozen": bool(s.estimation_frozen),
         "delta_hat": delta_hat,
+        "delta_std": finite_list("delta_std", s.delta_std) if s.delta_std else [],
         "f_hat_N": finite_list("f_hat", s.f_hat, m),
         "bf_hat": wrench_obj("bf_hat", s.bf_hat),
         "u_N": finite_list("u", s.u, m),
@@ -237,7 +238,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
     return dump(body)
 
 
-_FLAG_FIELDS = ("saturated", "faulty", "esc_failed", "probing")
+_FLAG_FIELDS = ("saturated", "faulty", "esc_failed", "probing", "observable")
 
 
 def _flag_lengths(name: str, m: int) -> tuple[int, ...]:
@@ -279,6 +280,7 @@ def decode_status(payload: bytes | str) -> AllocatorStatus:
         if "estimation_frozen" in obj
         else False,
         delta_hat=tuple(delta_hat.tolist()),
+        delta_std=tuple(vector(obj, "delta_std").tolist()) if obj.get("delta_std") else (),
         f_hat=tuple(vector(obj, "f_hat_N", m).tolist()),
         bf_hat=tuple(wrench(obj, "bf_hat").tolist()),
         u=tuple(vector(obj, "u_N", m).tolist()),

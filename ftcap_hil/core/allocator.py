@@ -53,7 +53,7 @@ class AllocatorConfig:
     slack_weight: float = 1e6
     effort_weight: float = 1.0
     dead_threshold: float = 0.1
-    backend: str = "proxqp"
+    backend: str = "daqp"
 
     def __post_init__(self) -> None:
         if not self.slack_weight > 0 or not self.effort_weight > 0:

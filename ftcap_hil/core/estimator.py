@@ -36,8 +36,9 @@ from ftcap_hil.core.messages import FloatArray
 
 
 class EstimatorKind(enum.Enum):
-    """The two estimators of this module."""
+    """Which estimator mode ``ftcap`` runs (``ftcap-literal`` always runs the literal one)."""
 
+    KALMAN = "kalman"
     WINDOWED = "windowed"
     LITERAL = "literal"
 
@@ -59,8 +60,42 @@ class EstimatorConfig:
     # and the measured wrench before the fit (0: off). Off by default: it also attenuates the
     # dither and probes against model error (docs/algorithm.md, the prefilter).
     prefilter: float = 0.0
+    # --- kind = "kalman" (core/kalman.py, core/decisions.py) ---
+    kind: str = "kalman"  # "kalman" | "windowed"
+    # Sensor noise std of the plant's dynamic state (u, v, r in m/s, m/s, rad/s for a
+    # vessel), as the data sheet gives it; None: a noise-free world (1e-6).
+    measurement_std: tuple[float, ...] | None = None
+    model_error: float = 0.002  # process noise on s: this fraction of S, through G
+    adapt_s: float = 30.0  # time constant of the process-noise scale learnt online (0: off)
+    # Which part of the estimated bias b the allocator compensates: "attributed" (only what
+    # core/decisions.py attributes to a thruster; the environment is the controller's) or
+    # "all" (the paper's model: every bias is a thruster's).
+    bias_compensation: str = "attributed"
+    q_delta: float = 0.002  # random walk of delta, per sqrt(s)
+    q_bias_rel: float = 0.002  # random walk of b, fraction of S per sqrt(s)
+    initial_delta_std: float = 0.05
+    initial_bias_rel: float = 0.3
+    reset_std: float = 0.3  # delta std after a change alarm
+    reset_bias_rel: float = 0.3  # b std after a change alarm, fraction of S
+    cusum_drift: float = 3.0  # CUSUM on nis - k: allowance per sample
+    cusum_threshold: float = 25.0
+    isolation_margin: float = 2.71  # suspects: within this log-likelihood of the best
+    z_flag: float = 4.0  # one-sided confidence (in std) for a reported fault
+    z_use: float = 2.0  # the allocator uses delta_hat + z_use std (capped at 1)
+    practical_loss: float = 0.05  # 1 - delta_hat below this is never acted upon
+    removal_threshold: float = 0.3  # a fault confidently below this is taken out
+    observable_std: float = 0.1  # delta std the recent window alone must reach
+    bias_min_rel: float = 0.03  # smallest thruster bias acted upon, fraction of its range
+    bias_base_s: float = 60.0  # time constant of the healthy bias baseline (environment)
 
     def __post_init__(self) -> None:
+        if self.bias_compensation not in ("attributed", "all"):
+            raise ValueError(
+                "estimator.bias_compensation: expected 'attributed' or 'all', got "
+                f"{self.bias_compensation!r}"
+            )
+        if self.kind not in ("kalman", "windowed"):
+            raise ValueError(f"estimator.kind: expected 'kalman' or 'windowed', got {self.kind!r}")
         if self.window < 2:
             raise ValueError(f"estimator.window: need >= 2, got {self.window}")
         if not 0.0 <= self.prefilter < 1.0:
@@ -82,6 +117,7 @@ class Estimate:
     innovation: float = 0.0  # normalized one-step prediction error before the update
     window_len: int = 0
     restarted: bool = False
+    delta_std: FloatArray | None = None  # (m,) standard deviation of delta_hat (None: unknown)
 
 
 def wrench_scale(B: FloatArray, u_min: FloatArray, u_max: FloatArray) -> FloatArray:

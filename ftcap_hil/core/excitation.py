@@ -31,11 +31,18 @@ class ExcitationConfig:
     dither_amplitude: float = 0.03  # fraction of each thruster's range, largest component
     dither_period: int = 2  # cycles per PRBS level
     probe_amplitude: float = 0.1  # fraction of the range
-    probe_interval: int = 50  # cycles between probes of a dead thruster (0: never)
+    probe_interval: int = 10  # cycles between probes of a dead thruster (0: never)
     probe_length: int = 4  # cycles per probe
     seed: int = 0
+    # Sized to the noise (Kalman estimator): the dither and probe amplitudes are raised to
+    # what brings each delta_i ``info_rate`` units of Fisher information per second at the
+    # sensor's noise, up to ``amplitude_max`` (fractions of the range). 0: fixed amplitudes.
+    info_rate: float = 40.0
+    amplitude_max: float = 0.25
 
     def __post_init__(self) -> None:
+        if self.info_rate < 0 or not 0 <= self.amplitude_max <= 1:
+            raise ValueError("excitation: info_rate >= 0 and amplitude_max in [0, 1]")
         if self.dither_amplitude < 0 or self.probe_amplitude < 0:
             raise ValueError("excitation: amplitudes must be >= 0")
         if self.dither_period < 1 or self.probe_length < 1 or self.probe_interval < 0:

@@ -129,6 +129,11 @@ class DaqpBoxSolver:
 
     name = "daqp"
 
+    # daqp's own primal feasibility tolerance (its default): an answer it reports optimal
+    # may sit this far outside a bound, so acceptance uses the same figure (relative to the
+    # bounds' size), then clips. A stricter acceptance threw optimal answers away.
+    PRIMAL_TOL = 1e-6
+
     def __init__(self, n: int) -> None:
         import daqp
 
@@ -139,14 +144,17 @@ class DaqpBoxSolver:
 
     def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
         """One daqp call (as :meth:`BoxQpSolver.solve`); infinite bounds become +-1e20."""
+        hi_f, lo_f = np.minimum(hi, _BIG), np.maximum(lo, -_BIG)
         x, _fval, exitflag, info = self._daqp.solve(
-            H, g, self._A, np.minimum(hi, _BIG), np.maximum(lo, -_BIG), self._sense
+            H, g, self._A, hi_f, lo_f, self._sense, primal_tol=self.PRIMAL_TOL
         )
         x = np.asarray(x, dtype=np.float64)
         iterations = int(info.get("iterations", 0)) if isinstance(info, dict) else 0
         if exitflag < 1:
             return BoxQpSolution(x, False, iterations)
-        return _accepted(x, lo, hi, 1e-7, iterations)
+        bounds = np.abs(np.concatenate([hi_f, lo_f]))
+        size = max(1.0, float(np.max(bounds[bounds < _BIG], initial=0.0)))
+        return _accepted(x, lo, hi, self.PRIMAL_TOL * size, iterations)
 
 
 class QpsolversBoxSolver:

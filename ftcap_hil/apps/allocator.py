@@ -13,14 +13,14 @@ import logging
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from ftcap_hil.config.daemon import LoadedConfig, load_daemon_config
+from ftcap_hil.config.daemon import load_daemon_config
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
-from ftcap_hil.runtime.daemon import AllocatorDaemon, Ports
+from ftcap_hil.runtime.allocator_ports import build_ports
+from ftcap_hil.runtime.command_log import CommandLog
+from ftcap_hil.runtime.daemon import AllocatorDaemon
 
 log = logging.getLogger(__name__)
 
@@ -69,98 +69,6 @@ def apply_params(daemon: AllocatorDaemon, values: dict[str, float]) -> None:
         ),
     )
     daemon.config = dataclasses.replace(daemon.config, core=core.config)
-
-
-def _section(cfg: LoadedConfig, name: str) -> dict[str, Any]:
-    table = cfg.raw.get(name, {})
-    if not isinstance(table, dict):
-        raise ConfigError(f"{cfg.source}.{name}: expected a table")
-    return dict(table)
-
-
-def open_can(cfg: LoadedConfig, stack: contextlib.ExitStack) -> tuple[Any, Any]:
-    from bridges.can_io.adapters import CanEscStatusSource, CanThrusterSink
-    from bridges.can_io.bus import open_can_bus
-    from bridges.can_io.force_map import ForceRawMap
-
-    c = _section(cfg, "can")
-    ths = cfg.daemon.thrusters
-    bus = stack.enter_context(
-        open_can_bus(str(c.get("interface", "canhub")), str(c.get("channel", "127.0.0.1:29536")))
-    )
-    fmap = ForceRawMap.from_limits(ths.u_min, ths.u_max, float(c.get("deadband_n", 0.0)))
-    sink = stack.enter_context(
-        CanThrusterSink(bus, fmap, node_id=int(c.get("node_id", 10)), zero_on_shutdown=True)
-    )
-    esc_ids = c.get("esc_node_ids")
-    esc = None
-    if c.get("esc_monitor", True):
-        esc = stack.enter_context(CanEscStatusSource(bus, ths.m, esc_node_ids=esc_ids))
-    return sink, esc
-
-
-def build_ports(
-    cfg: LoadedConfig,
-    stack: contextlib.ExitStack,
-    cmd_log: CommandLog | None,
-) -> tuple[Ports, Any]:
-    sink, esc = open_can(cfg, stack)
-    ports = Ports(
-        setpoints=[],
-        telemetry=[],
-        thrusters=LoggedSink(sink, cfg.daemon.thrusters.m, cmd_log),
-        esc_ages=esc.ages_s if esc is not None else None,
-    )
-    params = None
-    mav_cfg = _section(cfg, "mavlink")
-    if mav_cfg.pop("enabled", True):
-        from bridges.mavlink import allocator as mav
-        from bridges.mavlink.allocator_params import allocator_param_specs
-        from bridges.mavlink.config import MavlinkEndpoint, default_allocator_endpoint
-        from bridges.mavlink.status import MavlinkStatusSink
-
-        d = cfg.daemon
-        max_wrench = tuple(mav_cfg.pop("max_wrench", (0.3, 0.3, 0.06)))
-        limit = mav_cfg.pop("wrench_limit", None)
-        endpoint = MavlinkEndpoint.from_mapping("mavlink", mav_cfg, default_allocator_endpoint())
-        link = stack.enter_context(
-            mav.MavlinkAllocatorLink(
-                mav.AllocatorLinkConfig(
-                    cfg.daemon.thrusters.m, max_wrench, None if limit is None else tuple(limit)
-                ),
-                endpoint,
-                allocator_param_specs(
-                    d.core,
-                    d.setpoint_timeout_s,
-                    d.telemetry_timeout_s,
-                    d.esc_timeout_s,
-                    d.rate_hz,
-                    float(np.max(d.thrusters.u_max)),
-                ),
-            )
-        )
-        ports.setpoints += [link.setpoint, link.manual]
-        ports.telemetry.append(link.odometry)
-        ports.status.append(MavlinkStatusSink(link))
-        params = link.params
-    z_cfg = _section(cfg, "zenoh")
-    if z_cfg.pop("enabled", True):
-        from bridges.zenoh_io import config as zenoh_config
-        from bridges.zenoh_io import link as zenoh_link
-        from bridges.zenoh_io.status import ZenohStatusSink
-
-        conf_name = str(z_cfg.get("config", "allocator.json5"))
-        path = Path(conf_name)
-        if not path.exists():
-            path = zenoh_config.shipped_config_path(conf_name.removesuffix(".json5"))
-        conf = zenoh_link.load_config(path, list(z_cfg.get("overrides", [])))
-        zl = stack.enter_context(
-            zenoh_link.ZenohAllocatorLink(str(z_cfg.get("vessel", "ftcap1")), conf)
-        )
-        ports.setpoints.append(zl.setpoints)
-        ports.telemetry.append(zl.odometry)
-        ports.status.append(ZenohStatusSink(zl))
-    return ports, params
 
 
 def run(args: argparse.Namespace) -> int:

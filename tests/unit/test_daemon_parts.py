@@ -1,12 +1,15 @@
 """The allocator daemon's parts, each through its public methods (no processes, no sockets):
 estimation sampler, status assembly and announcements, malformed-input notice, call queue,
-latency record, parameter sync, and the daemon's cycle and loop on in-memory ports."""
+latency record, parameter sync, and the daemon's cycle and loop on in-memory ports (and
+real signals: a second one forces the exit, the zero still goes out)."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import re
+import signal
 import threading
 
 import numpy as np
@@ -24,6 +27,7 @@ from ftcap_hil.runtime.daemon import AllocatorDaemon, DaemonConfig, Ports
 from ftcap_hil.runtime.estimation import EstimationSampler
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.param_sync import ParamSync
+from ftcap_hil.runtime.signals import ForcedExit
 from ftcap_hil.runtime.status_report import (
     EscReport,
     Freshness,
@@ -341,3 +345,27 @@ def test_a_bad_mode_code_is_a_key_error_not_a_silent_change() -> None:
     with pytest.raises(KeyError):
         ParamSync(d, params)()
     assert d.config.core.mode is Mode.FTCAP
+
+
+class SignallingSink(Sink):
+    """Sends this process SIGTERM twice at the first non-zero command: the second signal
+    arrives while the daemon is stopping."""
+
+    def send(self, u: np.ndarray) -> bool:
+        ok = super().send(u)
+        if np.any(u != 0) and len(self.commands) < 100:
+            os.kill(os.getpid(), signal.SIGTERM)
+            os.kill(os.getpid(), signal.SIGTERM)
+        return ok
+
+
+def test_a_second_signal_forces_the_exit_and_the_zero_still_goes_out() -> None:
+    sink = SignallingSink()
+    ports = Ports([Mailbox("setpoint")], [], sink)
+    d = AllocatorDaemon(DaemonConfig(THS, B, SurfaceVessel(), CoreConfig(), rate_hz=100.0), ports)
+    d.ports.setpoints[0].put(WrenchSetpoint.checked(SURGE))
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(ForcedExit):
+        d.run(max_cycles=1000)
+    assert np.any(sink.commands[-2] != 0) and np.all(sink.commands[-1] == 0)
+    assert d.cycles == 1 and signal.getsignal(signal.SIGTERM) is before

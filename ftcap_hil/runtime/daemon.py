@@ -166,10 +166,6 @@ class AllocatorDaemon:
         """Deadlines missed so far (a cycle that ran past the next deadline counts each)."""
         return self.loop.stats.overruns
 
-    @property
-    def should_exit(self) -> bool:
-        return self.loop.should_exit
-
     # --- any thread ----------------------------------------------------------------------
 
     def call_in_loop(self, fn: Callable[[], None]) -> None:

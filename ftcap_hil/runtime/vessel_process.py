@@ -258,15 +258,6 @@ class VesselProcess:
         m = self.sim.m
         self._true_fault = (np.ones(m), np.zeros(m))  # (delta, f) last logged
 
-    @property
-    def overruns(self) -> int:
-        """Deadlines missed so far (a step that ran past the next deadline counts each)."""
-        return self.loop.stats.overruns
-
-    @property
-    def should_exit(self) -> bool:
-        return self.loop.should_exit
-
     def request_exit(self, *_: object) -> None:
         """End the run after the current step (any thread, signal-handler safe)."""
         self.loop.request_exit()
@@ -279,7 +270,7 @@ class VesselProcess:
         finally:
             log.info(
                 "stopped at sim time %.2f s after %d steps (%d overruns, %.2f s lost to stalls)",
-                self.sim.t_s, self.steps, self.overruns, self.lost_s,
+                self.sim.t_s, self.steps, self.loop.stats.overruns, self.lost_s,
             )  # fmt: skip
         return 0
 

@@ -382,5 +382,5 @@ def test_sigterm_ends_the_process_loop_and_restores_the_handler() -> None:
         assert proc.run() == 0
     finally:
         timer.cancel()
-    assert proc.should_exit and proc.steps > 0
+    assert proc.loop.should_exit and proc.steps > 0
     assert signal.getsignal(signal.SIGTERM) is before

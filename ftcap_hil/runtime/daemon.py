@@ -144,9 +144,7 @@ class AllocatorDaemon:
         self.not_sent = 0  # commands the sink refused (bus errors)
         self.transitions = TransitionLog(self._announce)
         self.esc_watchdog = EscWatchdog(self.transitions)
-        self.sampler = EstimationSampler(
-            config.plant, config.estimation_period_s, config.vessel_clock
-        )
+        self.sampler = EstimationSampler(config.estimation_period_s, config.vessel_clock)
         self.calls = PendingCalls(self.loop.wake)
         self.latency = LatencyStats()
         self.malformed_notice = MalformedNotice(min_interval_s=5.0)
@@ -159,7 +157,8 @@ class AllocatorDaemon:
         self._tau_d = np.zeros(config.B.shape[0])
 
     def _make_core(self, core_cfg: CoreConfig) -> FtcapCore:
-        return FtcapCore(self.config.B, self.config.thrusters, 1.0 / self.config.rate_hz, core_cfg)
+        dt = 1.0 / self.config.rate_hz
+        return FtcapCore(self.config.B, self.config.thrusters, dt, core_cfg, self.config.plant)
 
     @property
     def overruns(self) -> int:
@@ -227,9 +226,9 @@ class AllocatorDaemon:
             self.core.reset_command()
         else:
             self._tau_d = setpoint.tau
-            w, u_mean = (None, None) if sample is None else sample
+            obs, u_mean = (None, None) if sample is None else sample
             result = self.core.step(
-                setpoint.tau, w, u_sample=u_mean, dt_s=dt, forced_dead=fresh.esc_failed
+                setpoint.tau, obs, u_sample=u_mean, dt_s=dt, forced_dead=fresh.esc_failed
             )
             self._send(result.u, now)
             if sp_stamp != self._last_sp_stamp:

@@ -1,12 +1,12 @@
-"""The estimator's samples: a measured wrench and the mean command over the same interval.
+"""The estimator's samples: the plant's state at both ends of an interval and the mean command
+over the same interval.
 
 Once per ``estimation_period_s`` of telemetry, :class:`EstimationSampler` pairs two odometry
-samples ``x0 = [eta, nu]`` and ``x1`` (NED pose, body velocities) ``dt`` apart with the
-time-weighted mean of the commands the thrusters had over that interval (from a
-:class:`CommandHistory` of what was sent, with its stamps). The plant turns the pair into
-the measured wrench ``w`` (3,) = [X, Y, N] in the body frame. The command interval is found
-on this process's clock: the receipt stamps, corrected by :class:`VesselClock` for the
-telemetry's variable delay.
+samples ``x0 = [eta, nu]`` and ``x1`` (NED pose, body velocities) ``dt`` apart, as a core
+:class:`~ftcap_hil.core.estimation.Observation`, with the time-weighted mean of the commands
+the thrusters had over that interval (from a :class:`CommandHistory` of what was sent, with
+its stamps). The command interval is found on this process's clock: the receipt stamps,
+corrected by :class:`VesselClock` for the telemetry's variable delay.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ftcap_hil.core.estimation import Observation
 from ftcap_hil.core.messages import FloatArray, Odometry
-from ftcap_hil.core.plants import SurfaceVessel
 
 
 class CommandHistory:
@@ -84,10 +84,10 @@ class VesselClock:
 
 
 class EstimationSample(NamedTuple):
-    """A measured wrench ``w`` (3,) [N, N, N*m] and the mean command ``u_mean`` (m,) in N
-    over the interval it was measured on."""
+    """The states at both ends of an interval (``observation``, vessel-clock ``dt_s``) and the
+    mean command ``u_mean`` (m,) in N over it."""
 
-    w: FloatArray
+    observation: Observation
     u_mean: FloatArray
 
 
@@ -104,8 +104,7 @@ class EstimationSampler:
     receipt stamps).
     """
 
-    def __init__(self, plant: SurfaceVessel, period_s: float, use_vessel_clock: bool) -> None:
-        self.plant = plant
+    def __init__(self, period_s: float, use_vessel_clock: bool) -> None:
         self.period_s = period_s
         self.use_vessel_clock = use_vessel_clock
         self.history = CommandHistory(horizon_s=10 * period_s + 5.0)
@@ -148,4 +147,4 @@ class EstimationSampler:
             return None
         x0 = np.concatenate([prev.odom.eta, prev.odom.nu])
         x1 = np.concatenate([odom.eta, odom.nu])
-        return EstimationSample(self.plant.measured_wrench(x0, x1, dt), u_mean)
+        return EstimationSample(Observation(x0, x1, dt), u_mean)

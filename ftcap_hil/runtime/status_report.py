@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from ftcap_hil.core.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CycleResult
@@ -55,7 +56,7 @@ def _flags(a: BoolArray | None, m: int) -> tuple[bool, ...]:
     return (False,) * m if a is None else tuple(bool(v) for v in a)
 
 
-def _esc_fields(esc: EscReport | None) -> dict[str, tuple[float, ...]]:
+def _esc_fields(esc: EscReport | None) -> dict[str, Any]:
     if esc is None:
         return {}
     return {

@@ -61,7 +61,7 @@ def _odom(t_s: float, u: float = 0.0) -> Odometry:
 
 
 def _result() -> CycleResult:
-    core = FtcapCore(B, THS, 0.1, CoreConfig())
+    core = FtcapCore(B, THS, 0.1, CoreConfig(), SurfaceVessel())
     return core.step(SURGE, None)
 
 
@@ -69,8 +69,7 @@ def _result() -> CycleResult:
 
 
 def test_the_sampler_pairs_states_a_period_apart_with_the_commands_between() -> None:
-    plant = SurfaceVessel()
-    s = EstimationSampler(plant, period_s=0.3, use_vessel_clock=False)
+    s = EstimationSampler(period_s=0.3, use_vessel_clock=False)
     u = np.array([0.1, 0.1, -0.1, -0.1])
     s.command_sent(0, u)
     assert s.sample(None, 5 * MS) is None  # no telemetry yet
@@ -80,8 +79,10 @@ def test_the_sampler_pairs_states_a_period_apart_with_the_commands_between() -> 
     got = s.sample(_odom(0.3, 0.02), 310 * MS)
     assert got is not None
     np.testing.assert_allclose(got.u_mean, u)
-    x0, x1 = np.zeros(6), np.array([0.0, 0.0, 0.0, 0.02, 0.0, 0.0])
-    np.testing.assert_allclose(got.w, plant.measured_wrench(x0, x1, 0.3))
+    obs = got.observation  # the states at both ends, the interval on the vessel's clock
+    np.testing.assert_array_equal(obs.x_prev, np.zeros(6))
+    np.testing.assert_array_equal(obs.x_now, [0.0, 0.0, 0.0, 0.02, 0.0, 0.0])
+    assert obs.dt_s == pytest.approx(0.3)
     # the next interval starts where this one ended: the half-period command change counts
     s.command_sent(460 * MS, -u)
     got = s.sample(_odom(0.6, 0.02), 610 * MS)
@@ -90,7 +91,7 @@ def test_the_sampler_pairs_states_a_period_apart_with_the_commands_between() -> 
 
 
 def test_the_sampler_has_no_mean_before_the_first_command() -> None:
-    s = EstimationSampler(SurfaceVessel(), period_s=0.3, use_vessel_clock=True)
+    s = EstimationSampler(period_s=0.3, use_vessel_clock=True)
     s.sample(_odom(0.0), 10 * MS)
     s.command_sent(100 * MS, np.ones(4))  # after the interval's start
     assert s.sample(_odom(0.3), 310 * MS) is None

@@ -8,7 +8,6 @@ import math
 import numpy as np
 
 from ftcap_hil.core.messages import Odometry
-from ftcap_hil.core.plants import SurfaceVessel
 from ftcap_hil.runtime.estimation import EstimationSampler, VesselClock
 
 MS = 1_000_000  # ns
@@ -57,7 +56,7 @@ def _mean_command_error(vessel_clock: bool) -> float:
     """Largest error of the sampler's command average against the one over the interval
     the vessel's states really span (commands change every 0.1 s, telemetry every 0.1 s,
     a 0.3 s estimation period, 5-150 ms telemetry delay)."""
-    d = EstimationSampler(SurfaceVessel(), period_s=0.2827, use_vessel_clock=vessel_clock)
+    d = EstimationSampler(period_s=0.2827, use_vessel_clock=vessel_clock)
     rng = np.random.default_rng(2)
     commands = rng.uniform(-0.1, 0.1, (400, 4))
     delays = _delays(300, seed=3)

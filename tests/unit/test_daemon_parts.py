@@ -370,3 +370,20 @@ def test_a_second_signal_forces_the_exit_and_the_zero_still_goes_out() -> None:
         d.run(max_cycles=1000)
     assert np.any(sink.commands[-2] != 0) and np.all(sink.commands[-1] == 0)
     assert d.cycles == 1 and signal.getsignal(signal.SIGTERM) is before
+
+
+def test_telemetry_a_period_apart_reaches_the_estimator() -> None:
+    d, _, _ = _daemon()  # ftcap: the default mode estimates
+    box, sp = d.ports.telemetry[0], d.ports.setpoints[0]
+    sp.put(WrenchSetpoint.checked(SURGE), 1 * S)
+    d.cycle(1 * S)  # a command out before the first state: the interval has a mean
+    box.put(_odom(0.0), 1 * S + 50 * MS)
+    sp.put(WrenchSetpoint.checked(SURGE), 1 * S + 50 * MS)
+    first = d.cycle(1 * S + 60 * MS)
+    assert first is not None and first.estimation_frozen  # one state: no interval yet
+    box.put(_odom(0.3), 1 * S + 350 * MS)
+    sp.put(WrenchSetpoint.checked(SURGE), 1 * S + 350 * MS)
+    second = d.cycle(1 * S + 360 * MS)
+    assert second is not None and not second.estimation_frozen  # an observation went in
+    third = d.cycle(1 * S + 370 * MS)
+    assert third is not None and third.estimation_frozen  # the same telemetry: nothing new

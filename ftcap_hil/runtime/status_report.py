@@ -66,6 +66,18 @@ def _esc_fields(esc: EscReport | None) -> dict[str, Any]:
     }
 
 
+def _uncertainty_fields(last: CycleResult | None) -> dict[str, Any]:
+    """delta_std and observable when the estimator gives them (the Kalman stage)."""
+    if last is None:
+        return {}
+    fields: dict[str, Any] = {}
+    if last.estimate.delta_std is not None:
+        fields["delta_std"] = tuple(float(v) for v in last.estimate.delta_std)
+    if last.decision is not None:
+        fields["observable"] = tuple(bool(v) for v in last.decision.observable)
+    return fields
+
+
 def assemble_status(
     *,
     mode: Mode,
@@ -100,6 +112,7 @@ def assemble_status(
         faulty=_flags(last.faulty if last else None, m),
         esc_failed=_flags(fresh.esc_failed, m),
         probing=_flags(last.probing if last else None, m),
+        **_uncertainty_fields(last),
         setpoint_age_s=fresh.setpoint_age_s,
         telemetry_age_s=fresh.telemetry_age_s,
         malformed=counts.malformed,

@@ -17,6 +17,7 @@ import pytest
 
 from ftcap_hil.core.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
+from ftcap_hil.core.estimation import Observation
 from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.messages import EscStatus, Odometry, WrenchSetpoint
 from ftcap_hil.core.plants import SurfaceVessel
@@ -143,6 +144,22 @@ def test_status_after_an_allocation_carries_its_result() -> None:
     assert st.delta_hat == tuple(r.estimate.delta_hat.tolist()) and st.degraded
     assert st.esc_failed == (False,) * 4 and st.esc_rpm == ()  # no ESC monitor
     assert not st.estimation_frozen
+    assert st.observable == ()  # no observation yet: nothing decided
+
+
+def test_status_carries_the_estimators_uncertainty_and_observability() -> None:
+    core = FtcapCore(B, THS, 0.1, CoreConfig(), SurfaceVessel())
+    core.step(SURGE, None)
+    x = np.zeros(6)
+    r = core.step(SURGE, Observation(x, x, 0.1))
+    assert r.estimate.delta_std is not None and r.decision is not None
+    st = assemble_status(
+        mode=Mode.FTCAP, counts=LoopCounts(2, 0, 0), fresh=Freshness(0.01, 0.02, False, False),
+        last=r, u=r.u, tau_demand=SURGE, degraded=False,
+    )  # fmt: skip
+    assert st.delta_std == tuple(r.estimate.delta_std.tolist()) and 0 < st.delta_std[0] < 1
+    assert st.observable == tuple(bool(v) for v in r.decision.observable)
+    assert len(st.observable) == 4
 
 
 def test_a_cycle_announces_flags_and_fallback_on_their_transitions() -> None:

@@ -13,7 +13,7 @@ import pytest
 from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink.vessel import MavlinkVesselLink
-from tests.e2e.test_demo_support import free_udp_ports, ftcap_hil
+from tests.e2e.demo_support import free_udp_ports, ftcap_hil
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(60)]
 

@@ -40,6 +40,7 @@ from ftcap_hil.runtime.gcs_parts import (
     Injector,
     LinkLost,
     StatusLine,
+    state_of,
     status_text,
 )
 from ftcap_hil.runtime.loop import DeadlineLoop, LoopStats
@@ -170,7 +171,7 @@ class Flight:
         age_s = np.inf if odom is None else (now_ns - odom.stamp_ns) * 1e-9
         if timeout_s is not None and age_s > timeout_s:
             raise LinkLost(f"no ODOMETRY from the vessel for {age_s:.1f} s (t = {t:.1f} s)")
-        return None if odom is None else np.concatenate([odom.value.eta, odom.value.nu])
+        return None if odom is None else state_of(odom.value)
 
     def _submit_due(self, t: float) -> None:
         due = []

@@ -27,7 +27,7 @@ from bridges.mavlink.gcs import MavlinkGcsLink
 from ftcap_hil.core.controllers import PoseController
 from ftcap_hil.core.errors import ExitCode, FtcapError
 from ftcap_hil.core.faults import Injection
-from ftcap_hil.core.messages import FloatArray
+from ftcap_hil.core.messages import FloatArray, Odometry
 
 Controller = Callable[[FloatArray, FloatArray], FloatArray]
 Reference = Callable[[float], FloatArray]
@@ -59,6 +59,11 @@ class Interrupted(GroundStationError):
     """A stop was requested (SIGINT / SIGTERM) before the flight started."""
 
     exit_code = ExitCode.INTERRUPTED
+
+
+def state_of(odom: Odometry) -> FloatArray:
+    """x = [north (m), east (m), psi (rad), u (m/s), v (m/s), r (rad/s)] of one ODOMETRY."""
+    return np.concatenate([odom.eta, odom.nu])
 
 
 @dataclass(frozen=True)

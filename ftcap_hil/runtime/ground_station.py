@@ -33,14 +33,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import TypeVar
 
-import numpy as np
-
 from bridges.mavlink.allocator_params import CODE_OF_MODE, MODE_CODES
 from bridges.mavlink.gcs import MavlinkGcsLink
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavResult
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import Injection, injection_plan
-from ftcap_hil.core.messages import FaultKind, FloatArray, Odometry
+from ftcap_hil.core.messages import FaultKind
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.flight import FlightRecorder
@@ -55,6 +53,7 @@ from ftcap_hil.runtime.gcs_parts import (
     Refused,
     StatusLine,
     WrenchLaw,
+    state_of,
 )
 
 __all__ = [
@@ -133,11 +132,6 @@ class Mission:
         )
 
 
-def state_of(odom: Odometry) -> FloatArray:
-    """x = [north (m), east (m), psi (rad), u (m/s), v (m/s), r (rad/s)] of one ODOMETRY."""
-    return np.concatenate([odom.eta, odom.nu])
-
-
 @dataclass(frozen=True)
 class Connection:
     """What :meth:`GroundStation.connect` found; stamps are ``time.monotonic_ns()``."""
@@ -161,10 +155,6 @@ class GroundStation:
     check: Callable[[], None] | None = None
     current: Flight | None = None
     _stop: threading.Event = field(default_factory=threading.Event, repr=False)
-
-    @property
-    def stop_requested(self) -> bool:
-        return self._stop.is_set()
 
     def request_exit(self) -> None:
         """Abort the start-up, or end the flight after its current cycle."""

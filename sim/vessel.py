@@ -13,11 +13,9 @@ Per step of length ``dt_s`` (sim time), with the faults held over the step::
 
 A command takes effect when it was received, as on a real thruster: if its stamp falls
 inside the step (between the previous ``step`` call's ``now_s`` and this one's), the step is
-split there and the command acting before keeps the first part. (Applying it from the start
-of the step made it act up to one sim period early, 10 ms on average at 50 Hz; the allocator,
-which averages its commands over each telemetry interval, then saw a residual of ~2 % of full
-scale at every large command change, enough to mislead a window of few samples.) Only the
-latest command of a step is known to the step.
+split there and the command acting before keeps the first part, so the motion matches the
+allocator's time average of its commands (docs/decisions.md). Only the latest command of a
+step is known to the step.
 
 Watchdog: a command older than ``command_timeout_s`` (on the caller's clock, the one the
 stamps come from: wall time even when the sim runs faster than real time) is dropped and the
@@ -63,6 +61,10 @@ class SilentWindow:
 
 @dataclass(frozen=True)
 class VesselSimConfig:
+    """The simulated vessel: plant, thrusters and B (3, m), initial state, the command
+    watchdog (s, on the caller's clock), true faults (schedule and silent ESC windows), the
+    ESC telemetry model, the defaults of value-less injections and the RK4 substeps."""
+
     plant: SurfaceVessel
     thrusters: ThrusterSet
     B: FloatArray  # (3, m)
@@ -117,10 +119,12 @@ class VesselSim:
 
     @property
     def t_s(self) -> float:
+        """Sim time (s)."""
         return self._t_s
 
     @property
     def x(self) -> FloatArray:
+        """A copy of the true state (6,) [north, east, psi, u, v, r]."""
         return self._x.copy()
 
     # --- inputs ---
@@ -176,6 +180,7 @@ class VesselSim:
         )
 
     def silent(self) -> BoolArray:
+        """(m,) ESCs silent now: the windows at ``t_s``, overridden by ``set_silent``."""
         out = np.zeros(self.m, dtype=bool)
         for w in self.config.silent:
             if w.start_s <= self._t_s < w.end_s:
@@ -188,6 +193,7 @@ class VesselSim:
     # --- dynamics ---
 
     def command_age_s(self, now_s: float) -> float:
+        """Seconds from the latest command's stamp to ``now_s`` (inf if none arrived)."""
         return now_s - self._command_stamp_s
 
     def step(self, dt_s: float, now_s: float) -> SimSample:
@@ -241,6 +247,7 @@ class Decimator:
         self._step = 0
 
     def due(self) -> bool:
+        """Advance one step; True if the stream is due on it."""
         k = self._step
         self._step += 1
         return k == 0 or math.floor(k * self._ratio) > math.floor((k - 1) * self._ratio)
@@ -255,6 +262,7 @@ def record_header(names: list[str]) -> list[str]:
 
 
 def record_row(s: SimSample, monotonic_s: float) -> list[Any]:
+    """One ``--record`` CSV row of ``s`` (columns of :func:`record_header`)."""
     row: list[Any] = [f"{s.t_s:.6f}", f"{monotonic_s:.6f}", *s.x.tolist()]
     row += [int(s.command_fresh), s.command_age_s]
     for arr in (s.u, s.produced, s.delta, s.f):

@@ -62,6 +62,8 @@ class DataType(enum.IntEnum):
 
 
 class Health(enum.IntEnum):
+    """``uavcan.protocol.NodeStatus.health``."""
+
     OK = 0
     WARNING = 1
     ERROR = 2
@@ -69,6 +71,8 @@ class Health(enum.IntEnum):
 
 
 class Mode(enum.IntEnum):
+    """``uavcan.protocol.NodeStatus.mode`` (4..6 are reserved)."""
+
     OPERATIONAL = 0
     INITIALIZATION = 1
     MAINTENANCE = 2
@@ -107,6 +111,8 @@ class EscStatusMsg:
 
 @dataclass(frozen=True)
 class NodeStatusMsg:
+    """``uavcan.protocol.NodeStatus``: uptime (s), health, mode, sub-mode (0..7), vendor."""
+
     uptime_s: int
     health: Health = Health.OK
     mode: Mode = Mode.OPERATIONAL
@@ -134,6 +140,11 @@ def check_node_id(name: str, node_id: int) -> int:
     return node_id
 
 
+def check_node_ids(name: str, node_ids: Iterable[int]) -> tuple[int, ...]:
+    """:func:`check_node_id` on each of ``node_ids``, naming ``name[i]`` on error."""
+    return tuple(check_node_id(f"{name}[{i}]", n) for i, n in enumerate(node_ids))
+
+
 class TransferIds:
     """Transfer ID counters, one per (source node, data type), wrapping 31 -> 0."""
 
@@ -141,6 +152,7 @@ class TransferIds:
         self._next: dict[tuple[int, int], int] = {}
 
     def next(self, source_node_id: int, data_type: DataType) -> int:
+        """The transfer ID to use now for (``source_node_id``, ``data_type``), 0..31."""
         key = (source_node_id, int(data_type))
         tid = self._next.get(key, 0)
         self._next[key] = (tid + 1) & 0x1F
@@ -303,6 +315,7 @@ class TransferAssembler:
         self.orphans = 0
 
     def feed(self, frame: CanFrame, stamp_ns: int) -> Received | None:
+        """Take one frame received at ``stamp_ns`` (monotonic); see the class docstring."""
         if not frame.extended:
             return None
         fid = FrameId.parse(frame.can_id)

@@ -3,23 +3,12 @@
 For machines without SocketCAN (no ``vcan``): every frame one client sends reaches every
 other connected client, in order, like on a real bus. Loopback only, never multicast.
 
-Why this design (and not the alternatives considered):
-
-* ``python-can-remote`` (PyPI 0.3.0): the server opens a python-can bus of its own per
-  client, so it still needs a shareable backend; it speaks websockets through a threaded
-  HTTP server bound to 0.0.0.0 by default, overrides ``recv`` (filters bypassed) and is not
-  a project dependency.
-* a socketcand-protocol hub for python-can's built-in ``socketcand`` client: that client
-  checks its handshake replies with one ``recv`` compared for equality, so a frame that
-  arrives right after ``< ok >`` breaks the connection; it needs ``tcp_tune`` or Nagle
-  delays multi-frame transfers; the ASCII protocol is parsed with a string buffer; and
-  ``receive_own_messages`` is not supported.
-* chosen: this hub plus a small python-can interface plugin (``bridges.can_io.hub_bus``,
-  registered under the ``can.interface`` entry point name ``canhub``). Both ends are ours,
-  so the wire is a fixed 8-byte binary header per frame, TCP_NODELAY on both sides, one
-  ``select`` wake-up per batch, clean shutdown, and no handshake race: the hub sends its
-  banner only after the client joined the broadcast set, so once a ``CanHubBus`` is
-  constructed it receives every later frame.
+The clients are ``bridges.can_io.hub_bus.CanHubBus``, a python-can interface plugin
+registered under the ``can.interface`` entry point name ``canhub`` (why not an existing
+remote-CAN transport: docs/decisions.md). Both ends are ours, so the wire is a fixed 8-byte
+binary header per frame, TCP_NODELAY on both sides, one ``select`` wake-up per batch, clean
+shutdown, and no handshake race: the hub sends its banner only after the client joined the
+broadcast set, so once a ``CanHubBus`` is constructed it receives every later frame.
 
 Wire format, both directions, little-endian; the hub speaks first with ``BANNER``::
 
@@ -44,7 +33,6 @@ import socket
 import struct
 import threading
 from dataclasses import dataclass, field
-from types import TracebackType
 
 from ftcap_hil.core.errors import MalformedMessage
 
@@ -142,6 +130,7 @@ class CanHub:
 
     @property
     def port(self) -> int:
+        """The TCP port listened on (the chosen one when started with ``port=0``)."""
         if self._listener is None:
             raise RuntimeError("CanHub.port: hub not started")
         return int(self._listener.getsockname()[1])
@@ -153,9 +142,11 @@ class CanHub:
 
     @property
     def client_count(self) -> int:
+        """Clients connected now."""
         return len(self._clients)
 
     def start(self) -> CanHub:
+        """Bind, listen and start the hub thread (idempotent); OSError if the port is taken."""
         if self._closed:
             raise RuntimeError("CanHub.start: hub was shut down")
         if self._thread is not None:
@@ -198,12 +189,7 @@ class CanHub:
     def __enter__(self) -> CanHub:
         return self.start()
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.shutdown()
 
     def _run(self) -> None:

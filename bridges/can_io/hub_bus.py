@@ -6,7 +6,7 @@ Registered in pyproject.toml under the ``can.interface`` entry point, so after
     can.Bus(interface="canhub", channel="127.0.0.1:29536", receive_own_messages=False)
 
 The channel is ``"HOST:PORT"`` (or just ``"PORT"``) of a running hub; the host must be a
-loopback address. See ``bridges/can_io/hub.py`` for the wire format and why this transport.
+loopback address. See ``bridges/can_io/hub.py`` for the wire format.
 
 Semantics, as close to a real bus as the hub allows: every frame sent by another client is
 received once, in order; own frames only with ``receive_own_messages=True``. ``send`` writes

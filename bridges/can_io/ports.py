@@ -1,4 +1,4 @@
-"""Lifecycle, send and receive plumbing shared by the DroneCAN adapters in ``can_dronecan``.
+"""Lifecycle, send and receive plumbing shared by the DroneCAN adapters (``adapters.py``).
 
 ``CanPort``: optional bus ownership, idempotent ``shutdown()``, context manager, ``stale``
 flag logged on transitions. ``CanSender``: message -> frames -> ``bus.send`` with transfer
@@ -12,7 +12,6 @@ import logging
 import threading
 import time
 from collections.abc import Iterable
-from types import TracebackType
 from typing import Self
 
 import can
@@ -68,9 +67,7 @@ class CanPort:
     def __enter__(self) -> Self:
         return self
 
-    def __exit__(
-        self, et: type[BaseException] | None, e: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.shutdown()
 
 
@@ -140,8 +137,7 @@ def receipt_ns(timestamp: float, now_ns: int, wall_s: float) -> int:
     kernel's SO_TIMESTAMPNS, taken when the frame reached the socket, before the receive
     thread waited for the scheduler and the GIL. Its age against ``wall_s`` (read together
     with ``now_ns``) moves the stamp back. A missing, future or implausibly old timestamp
-    gives ``now_ns``. Found in the one-vCPU qemu VM: callback stamps lagged the allocator's
-    sends by a median 78 ms (p99 390 ms), and the vessel applied each command that much late.
+    gives ``now_ns``. Why not the callback's own clock: docs/decisions.md.
     """
     age_s = wall_s - timestamp
     if timestamp <= 0.0 or not 0.0 <= age_s < MAX_RECEIPT_AGE_S:
@@ -170,6 +166,8 @@ class CanReceiver(CanPort, can.Listener):
         self._notifier.add_listener(self)
 
     def on_message_received(self, msg: can.Message) -> None:
+        """python-can callback (Notifier thread): reassemble, decode, hand to ``_handle``;
+        malformed input is counted and dropped."""
         if msg.is_error_frame or msg.is_remote_frame or self._closed:
             return
         now = receipt_ns(msg.timestamp, time.monotonic_ns(), time.time())
@@ -186,6 +184,7 @@ class CanReceiver(CanPort, can.Listener):
             log.debug("%s: dropped malformed input: %s", self.name, e)
 
     def on_error(self, exc: Exception) -> None:
+        """python-can callback when the bus fails to receive: count it, mark the port stale."""
         self.receive_errors += 1
         self._mark(True, f"receive failed: {exc}")
         time.sleep(0.05)  # a bus that keeps failing must not spin the Notifier thread

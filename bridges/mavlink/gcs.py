@@ -32,6 +32,7 @@ from typing import Any
 from bridges.mavlink.codec import (
     Severity,
     SystemStatus,
+    bits,
     odometry_from_message,
     status_from_message,
 )
@@ -54,6 +55,8 @@ _STARTING = (SystemStatus.UNINIT, SystemStatus.BOOT)
 
 @dataclass(frozen=True)
 class Heartbeat:
+    """One HEARTBEAT's MAV_TYPE, MAV_AUTOPILOT and MAV_STATE (``system_status``)."""
+
     mav_type: int
     autopilot: int
     system_status: int
@@ -61,6 +64,8 @@ class Heartbeat:
 
 @dataclass(frozen=True)
 class StatusText:
+    """One STATUSTEXT (chunks reassembled) and the (system, component) that sent it."""
+
     system: int
     component: int
     severity: Severity
@@ -149,7 +154,7 @@ class MavlinkGcsLink(PortOwner):
     def _on_esc(self, msg: Any, now_ns: int) -> None:
         if self._from(msg, self.allocator_ids):
             n = int(msg.n_thrusters)
-            failed = tuple(bool(msg.failed >> i & 1) for i in range(n))
+            failed = bits(int(msg.failed), n)
             self.esc_status.put(
                 EscReport(tuple(msg.rpm[:n]), tuple(msg.current[:n]), tuple(msg.age[:n]), failed)
             )
@@ -184,8 +189,7 @@ class MavlinkGcsLink(PortOwner):
             self._cond.notify_all()
 
     def _on_command_ack(self, msg: Any, now_ns: int) -> None:
-        if not self._port.addressed_to_me(msg.target_system, msg.target_component):
-            self._port.stats.ignored += 1
+        if not self._port.accepts(msg.target_system, msg.target_component):
             return
         with self._cond:
             self._acks[(self._src(msg), msg.command)] = MavResult(msg.result)
@@ -204,6 +208,7 @@ class MavlinkGcsLink(PortOwner):
             return {name: entry[0] for name, entry in self._params.get(ids, {}).items()}
 
     def wait_heartbeat(self, ids: Ids, timeout_s: float = 3.0) -> bool:
+        """Block until a HEARTBEAT from ``ids`` has been heard (True) or ``timeout_s`` passes."""
         with self._cond:
             return self._cond.wait_for(lambda: ids in self._heartbeats, timeout_s)
 
@@ -274,6 +279,7 @@ class MavlinkGcsLink(PortOwner):
         return None
 
     def request_params(self, ids: Ids) -> bool:
+        """PARAM_REQUEST_LIST to ``ids``, not waiting (the answers reach :meth:`params_of`)."""
         return self._port.send(lambda mav: mav.param_request_list_send(ids[0], ids[1]))
 
     def fetch_params(self, ids: Ids, timeout_s: float = 2.0) -> dict[str, float]:
@@ -307,6 +313,7 @@ class MavlinkGcsLink(PortOwner):
         return None
 
     def drain_statustexts(self) -> list[Stamped[StatusText]]:
+        """Every STATUSTEXT received since the last drain, oldest first."""
         out: list[Stamped[StatusText]] = []
         while True:
             try:

@@ -149,16 +149,20 @@ class MavlinkPort:
 
     @property
     def system_id(self) -> int:
+        """Our MAVLink system id."""
         return self.endpoint.system_id
 
     @property
     def component_id(self) -> int:
+        """Our MAVLink component id."""
         return self.endpoint.component_id
 
     def time_boot_ms(self) -> int:
+        """Milliseconds since this port opened, wrapped to uint32 (MAVLink ``time_boot_ms``)."""
         return ((time.monotonic_ns() - self._t0_ns) // 1_000_000) & 0xFFFFFFFF
 
     def time_boot_us(self) -> int:
+        """Microseconds since this port opened (MAVLink ``time_usec`` when no other clock)."""
         return (time.monotonic_ns() - self._t0_ns) // 1_000
 
     def addressed_to_me(self, target_system: int, target_component: int | None = None) -> bool:
@@ -166,6 +170,13 @@ class MavlinkPort:
         if target_system not in (0, self.system_id):
             return False
         return target_component is None or target_component in (0, self.component_id)
+
+    def accepts(self, target_system: int, target_component: int | None = None) -> bool:
+        """:meth:`addressed_to_me`, counting a message for someone else in ``stats.ignored``."""
+        if self.addressed_to_me(target_system, target_component):
+            return True
+        self.stats.ignored += 1
+        return False
 
     # --- sending (any thread) ---
 
@@ -199,6 +210,7 @@ class MavlinkPort:
                 self._heartbeat.next_ns = 0
 
     def send_heartbeat(self) -> bool:
+        """One HEARTBEAT now with the current status (the dispatch thread sends them at 1 Hz)."""
         hb = self._heartbeat
         with hb.lock:
             status = int(hb.status)
@@ -334,7 +346,12 @@ class PortOwner:
     def is_alive(self) -> bool:
         return self._port.is_alive
 
+    def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
+        """STATUSTEXT (chunked beyond 50 characters); False on a transport error."""
+        return self._port.send_statustext(text, severity)
+
     def shutdown(self) -> None:
+        """Stop the port's dispatch thread and close its connection. Idempotent."""
         self._port.shutdown()
 
     def __enter__(self) -> Self:

@@ -38,6 +38,8 @@ _INT_LIMIT = 2.0**24  # integers above this are not exact as float32
 
 
 class ParamType(enum.Enum):
+    """How a parameter travels: MAV_PARAM_TYPE_REAL32 (FLOAT) or _INT32 (INT)."""
+
     FLOAT = "float"
     INT = "int"
 
@@ -61,6 +63,8 @@ class ParamSpec:
 
 @dataclass(frozen=True)
 class SetResult:
+    """The outcome of :meth:`ParamServer.set` (``reason``: why it was refused)."""
+
     accepted: bool
     value: float  # the value in force after the attempt
     reason: str = ""
@@ -102,6 +106,7 @@ class ParamServer:
         return len(self._specs)
 
     def index_of(self, name: str) -> int | None:
+        """Table index of ``name``, or None if there is no such parameter."""
         return self._index.get(name)
 
     def get(self, name: str) -> float:
@@ -110,10 +115,12 @@ class ParamServer:
             return self._values[self._index[name]]
 
     def get_index(self, index: int) -> float:
+        """Current value by table index; IndexError outside the table."""
         with self._lock:
             return self._values[index]
 
     def values(self) -> dict[str, float]:
+        """Every current value by name, in table order (a consistent snapshot)."""
         with self._lock:
             return {spec.name: v for spec, v in zip(self._specs, self._values, strict=True)}
 
@@ -160,6 +167,7 @@ class ParamService:
         self._port: MavlinkPort | None = None
 
     def routes(self) -> dict[str, Route]:
+        """The PARAM_* handlers to put in a :class:`MavlinkPort`'s route table."""
         return {
             "PARAM_REQUEST_LIST": Route(self._on_request_list),
             "PARAM_REQUEST_READ": Route(self._on_request_read),
@@ -167,6 +175,7 @@ class ParamService:
         }
 
     def attach(self, port: MavlinkPort) -> None:
+        """The port that answers go out on (before it, requests are ignored)."""
         self._port = port
 
     def _send_value(self, index: int) -> None:
@@ -186,11 +195,7 @@ class ParamService:
 
     def _for_me(self, msg: Any) -> bool:
         port = self._port
-        if port is None or not port.addressed_to_me(msg.target_system, msg.target_component):
-            if port is not None:
-                port.stats.ignored += 1
-            return False
-        return True
+        return port is not None and port.accepts(msg.target_system, msg.target_component)
 
     def _on_request_list(self, msg: Any, now_ns: int) -> None:
         if self._for_me(msg):

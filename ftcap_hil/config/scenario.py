@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ftcap_hil.config.fault_keys import fault_event
 from ftcap_hil.config.tables import dataclass_from_table, get, number, vector
 from ftcap_hil.config.toml import read_toml, shipped_names
 from ftcap_hil.config.vessel import plant_from_tables
@@ -21,7 +22,7 @@ from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.estimator import EstimatorConfig
 from ftcap_hil.core.excitation import ExcitationConfig
-from ftcap_hil.core.faults import FaultEvent, FaultSchedule
+from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.plants import LinearPlant
 from ftcap_hil.core.scenario import Scenario, Segment
 from ftcap_hil.core.status import Mode
@@ -40,7 +41,9 @@ def _faults(entries: list[dict[str, Any]], m: int, where: str) -> FaultSchedule:
         if delta is not None and np.any((delta < 0) | (delta > 1)):
             raise ConfigError(f"{w}.delta: must lie in [0, 1], got {ev['delta']!r}")
         events.append(
-            FaultEvent(
+            fault_event(
+                ev,
+                w,
                 number(ev, "from", w),
                 number(ev, "until", w) if "until" in ev else math.inf,
                 None if thr is None else thr - 1,

@@ -4,7 +4,7 @@
         s.t.    u in Omega(u_prev)    (amplitude box  intersected with  rate box, eq. 2)
 
 A demand more than 10 times the achievable wrench is shrunk along its own direction
-first (the result is the same saturated allocation; 1e300 N no longer reaches the solver).
+first (the result is the same saturated allocation, and the solver never sees 1e300 N).
 Qs = slack_weight / S^2 and Ru = effort_weight / u_range^2 keep the weights dimensionless;
 slack_weight >> effort_weight makes the wrench equation of eq. (13) nearly hard, so a
 feasible demand is met to ~effort_weight/slack_weight relative accuracy and an infeasible
@@ -33,6 +33,8 @@ _DELTA_STILL = 1e-9  # delta_hat moves below this (max abs): the QP's H is reuse
 
 
 class AllocationStatus(enum.Enum):
+    """How one allocation was obtained."""
+
     OK = "ok"
     FALLBACK = "fallback"  # solver failed; clipped pseudo-inverse used
     INVALID_DEMAND = "invalid-demand"  # non-finite demand; zero demand allocated
@@ -40,10 +42,18 @@ class AllocationStatus(enum.Enum):
 
 @dataclass(frozen=True)
 class AllocatorConfig:
+    """Weights of eq. (13) and the dead threshold; ValueError on construction if invalid.
+
+    ``slack_weight`` (> 0) and ``effort_weight`` (> 0) are dimensionless (Qs and Ru are
+    scaled by S and the thruster ranges, module docstring). A thruster whose delta_hat is
+    below ``dead_threshold`` (in [0, 1)) is taken out. ``backend``: the QP backend name
+    (:func:`ftcap_hil.core.qp.make_solver`).
+    """
+
     slack_weight: float = 1e6
     effort_weight: float = 1.0
     dead_threshold: float = 0.1
-    backend: str = "proxqp"
+    backend: str = "daqp"
 
     def __post_init__(self) -> None:
         if not self.slack_weight > 0 or not self.effort_weight > 0:
@@ -54,6 +64,9 @@ class AllocatorConfig:
 
 @dataclass(frozen=True)
 class Allocation:
+    """The result of one :meth:`Allocator.allocate`; wrenches (k,) are [X (N), Y (N), N (N*m)]
+    in the body frame, per-thruster arrays (m,) in vessel-file order."""
+
     u: FloatArray  # (m,) commands (N), inside Omega(u_prev)
     tau_planned: FloatArray  # (k,) B Delta_hat u + b_hat: what the allocator expects to get
     unallocated: FloatArray  # (k,) tau_d - tau_planned
@@ -64,6 +77,14 @@ class Allocation:
 
 
 class Allocator:
+    """Step 3 of F-TCAP (module docstring) on one persistent, warm-started QP workspace.
+
+    ``B`` (k, m): effectiveness matrix (N, N, N*m per N of thrust). ``thrusters``: amplitude
+    limits u_min/u_max (N) and rate limits. ``dt_s``: the configured allocation period (s),
+    which sizes the rate box. ``scale`` (k,): S, the largest achievable |tau| per axis
+    (:func:`ftcap_hil.core.estimator.wrench_scale`). Called from one thread only.
+    """
+
     def __init__(
         self,
         B: FloatArray,
@@ -101,12 +122,13 @@ class Allocator:
 
     @property
     def backend(self) -> str:
+        """Name of the QP backend in use."""
         return self._solver.name
 
     def _effective(self, delta_hat: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """B Delta_hat and the QP's H for it. Rebuilt only when delta_hat moved by more than
-        _DELTA_STILL since the last build: in steady state the estimates drift by ~1e-10 per
-        cycle, and handing the solver the same H lets proxsuite skip its set-up."""
+        """B Delta_hat and the QP's H for it, rebuilt only when delta_hat moved by more than
+        _DELTA_STILL since the last build: the same H array handed back lets the proxsuite
+        workspace skip its set-up (docs/decisions.md)."""
         key = self._h_key
         if key is None or np.abs(delta_hat - key).max() > _DELTA_STILL:
             beff = self._B * delta_hat
@@ -122,7 +144,8 @@ class Allocator:
         probe_limit: FloatArray | None = None,
         step: FloatArray | None = None,
     ) -> tuple[FloatArray, FloatArray]:
-        """Omega(u_prev) with dead thrusters held at 0 (or within +-probe_limit when probed)."""
+        """(lo, hi), each (m,) in N: Omega(u_prev) with the ``dead`` thrusters held at 0 (or
+        within +-probe_limit when probed); ``step`` (m,) overrides the per-cycle rate limit."""
         live = ~dead
         u_min = self._u_min * live
         u_max = self._u_max * live
@@ -142,8 +165,15 @@ class Allocator:
         probe_limit: FloatArray | None = None,
         dt_s: float | None = None,
     ) -> Allocation:
-        """u_prev: the command now on the actuators (centre of the rate box); dt_s: time
-        since it was sent, when it differs from the configured period."""
+        """Allocate the demanded wrench ``tau_d`` (k,) to thruster forces (N).
+
+        ``delta_hat`` (m,) effectiveness estimates in [0, 1]; ``bf_hat`` (k,) estimated bias
+        wrench B f_hat; ``u_prev`` (m,) the command now on the actuators (centre of the rate
+        box); ``u_pref`` (m,) preferred command (excitation), None for zero; ``probe_limit``
+        (m,) amplitude a dead thruster may use while probed; ``dt_s`` time since ``u_prev``
+        was sent, when it differs from the configured period. A non-finite ``tau_d`` is
+        allocated as zero demand (``INVALID_DEMAND``); never raises for numerical outcomes.
+        """
         step = self._step
         if dt_s is not None:
             if dt_s != self._step_at[0]:

@@ -2,8 +2,8 @@
 
 Call order per cycle t (Algorithm 1 of the paper):
 
-    w = plant.measured_wrench(x(t-1), x(t), dt)      # by the caller, from telemetry
-    result = core.step(tau_d(t), w)                  # w = None when telemetry is stale
+    sample = Observation(x(t-1), x(t), dt)           # by the caller, from telemetry
+    result = core.step(tau_d(t), sample)             # None when telemetry is stale
     send(result.u)
 
 ``step`` assumes that the command acting over the last estimation interval is the one it
@@ -20,6 +20,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ftcap_hil.core.allocator import Allocation, Allocator, AllocatorConfig
+from ftcap_hil.core.decisions import Decision
+from ftcap_hil.core.estimation import (
+    EstimationStage,
+    IdentityStage,
+    KalmanStage,
+    Observation,
+    OracleStage,
+    Sample,
+    WindowedStage,
+)
 from ftcap_hil.core.estimator import (
     Estimate,
     EstimatorConfig,
@@ -31,36 +41,67 @@ from ftcap_hil.core.excitation import Excitation, ExcitationConfig
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, FloatArray
+from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.status import Mode
 
 
 @dataclass(frozen=True)
 class CoreConfig:
+    """Everything one :class:`FtcapCore` is built from: the mode (:class:`Mode`), the
+    estimator, allocator and excitation settings, and the fault-flag thresholds (fractions
+    of full effectiveness, 0 < fault_threshold <= fault_clear <= 1 in practice)."""
+
     mode: Mode = Mode.FTCAP
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
     allocator: AllocatorConfig = field(default_factory=AllocatorConfig)
     excitation: ExcitationConfig = field(default_factory=ExcitationConfig)
     # Fault flags, with hysteresis: flagged when delta_hat drops below fault_threshold,
-    # cleared when it rises above fault_clear. Flags only change on estimates the window
-    # determines (window_len >= m + k): right after a restart the estimate explains one or
-    # two samples by a minimum change and may dip transiently on healthy thrusters.
+    # cleared when it rises above fault_clear (when each stage may change them: estimation.py).
     fault_threshold: float = 0.85
     fault_clear: float = 0.95
 
 
 @dataclass(frozen=True)
 class CycleResult:
+    """What one :meth:`FtcapCore.step` produced; per-thruster arrays are (m,)."""
+
     u: FloatArray  # (m,) command to send (N)
     estimate: Estimate
     allocation: Allocation
     faulty: BoolArray  # (m,), see CoreConfig.fault_threshold / fault_clear
     probing: BoolArray  # (m,), a recovery probe is active
     estimation_frozen: bool
+    decision: Decision | None = None  # the Kalman stage's decision (in use, observable, bias)
+
+
+def _finite(sample: Sample) -> bool:
+    if isinstance(sample, Observation):
+        return sample.finite()
+    return math.isfinite(float(np.sum(sample)))
 
 
 class FtcapCore:
+    """The allocator's cycle (module docstring): fault estimation, excitation, allocation.
+
+    ``B`` (k, m): effectiveness matrix, k = 3 for a surface vessel (tau = [X (N), Y (N),
+    N (N*m)], body frame) or 1 for the linear plant; ``thrusters``: the m thrusters' limits;
+    ``dt_s``: the allocation period (s). The mode picks the estimation stage
+    (core/estimation.py): ``FTCAP`` the Kalman estimator (or the windowed one with
+    ``estimator.kind = "windowed"``), ``FTCAP_LITERAL`` the paper's literal one,
+    ``ORACLE`` the truth handed in to :meth:`step`, ``CAP`` / ``NONE`` none (Delta_hat = I,
+    f_hat = 0). ``plant``: the allocator's model of the plant, needed by the Kalman
+    estimator and to invert :class:`Observation` samples for the windowed one. Pure and
+    single-threaded: the caller hands in measurements and times, the core reads no clock.
+    ValueError if ``B`` and ``thrusters`` disagree on m.
+    """
+
     def __init__(
-        self, B: FloatArray, thrusters: ThrusterSet, dt_s: float, config: CoreConfig | None = None
+        self,
+        B: FloatArray,
+        thrusters: ThrusterSet,
+        dt_s: float,
+        config: CoreConfig | None = None,
+        plant: LinearPlant | SurfaceVessel | None = None,
     ):
         self.config = config or CoreConfig()
         self.B = np.array(B, dtype=np.float64)
@@ -69,90 +110,100 @@ class FtcapCore:
             raise ValueError(f"B has {self.m} columns but the vessel has {thrusters.m} thrusters")
         self.scale = wrench_scale(self.B, thrusters.u_min, thrusters.u_max)
         self.allocator = Allocator(self.B, thrusters, dt_s, self.scale, self.config.allocator)
-        u_range = np.maximum(np.abs(thrusters.u_min), np.abs(thrusters.u_max))
-        self.excitation = Excitation(self.B, u_range, self.config.excitation)
-        mode = self.config.mode
-        self.estimator: WindowedEstimator | LiteralEstimator | None = None
-        if mode is Mode.FTCAP:
-            self.estimator = WindowedEstimator(self.B, self.scale, self.config.estimator)
-        elif mode is Mode.FTCAP_LITERAL:
-            self.estimator = LiteralEstimator(self.B, self.scale, self.config.estimator)
-        self._pinv = np.linalg.pinv(self.B)
+        self.u_range = np.maximum(np.abs(thrusters.u_min), np.abs(thrusters.u_max))
+        self.excitation = Excitation(self.B, self.u_range, self.config.excitation)
+        self.stage = self._make_stage(plant)
+        self._unsized = isinstance(self.stage, KalmanStage) and self.config.excitation.info_rate > 0
         self.u_prev = np.zeros(self.m)
-        self._faulty = np.zeros(self.m, dtype=bool)
-        self._estimate = Estimate(np.ones(self.m), np.zeros(self.k), np.zeros(self.m))
 
-    def _estimate_for(
-        self, w: FloatArray | None, applied: FloatArray, truth: Truth | None
-    ) -> Estimate:
-        """w: a finite sample, or None (no sample, or a non-finite one)."""
-        mode = self.config.mode
-        if mode is Mode.ORACLE:
-            if truth is None:
-                raise ValueError("oracle mode needs the true faults")
-            bf = self.B @ truth.f
-            return Estimate(truth.delta.copy(), bf, truth.f.copy())
-        if self.estimator is None or w is None:
-            return self._estimate  # CAP/NONE keep the identity; stale telemetry freezes
-        return self.estimator.update(applied, w)
+    def _size_excitation(self, estimation_dt_s: float) -> None:
+        """Raise the dither and probe amplitudes to what the sensor's noise needs (see
+        ExcitationConfig.info_rate), once the estimation period is known."""
+        assert isinstance(self.stage, KalmanStage)
+        exc = self.config.excitation
+        need = self.stage.filter.excitation_for(exc.info_rate, estimation_dt_s) / self.u_range
+        frac = float(min(max(need.max(), 0.0), exc.amplitude_max))
+        sized = replace(
+            exc,
+            dither_amplitude=max(exc.dither_amplitude, frac),
+            probe_amplitude=max(exc.probe_amplitude, frac),
+        )
+        self.excitation.config = sized
+        self.config = replace(self.config, excitation=sized)
+        self._unsized = False
+
+    def _make_stage(self, plant: LinearPlant | SurfaceVessel | None) -> EstimationStage:
+        cfg = self.config
+        on, off = cfg.fault_threshold, cfg.fault_clear
+        if cfg.mode is Mode.ORACLE:
+            return OracleStage(self.B, on, off)
+        if cfg.mode is Mode.FTCAP_LITERAL:
+            literal = LiteralEstimator(self.B, self.scale, cfg.estimator)
+            return WindowedStage(literal, plant, on, off)
+        if cfg.mode is not Mode.FTCAP:
+            return IdentityStage(self.m, self.k)
+        if cfg.estimator.kind == "windowed":
+            windowed = WindowedEstimator(self.B, self.scale, cfg.estimator)
+            return WindowedStage(windowed, plant, on, off)
+        if plant is None:
+            raise ValueError("the Kalman estimator needs the plant model (FtcapCore(plant=...))")
+        return KalmanStage(self.B, self.scale, self.u_range, plant, cfg.estimator, on, off)
 
     def step(
         self,
         tau_d: FloatArray,
-        w: FloatArray | None,
+        w: Sample | None,
         truth: Truth | None = None,
         u_sample: FloatArray | None = None,
         dt_s: float | None = None,
         forced_dead: BoolArray | None = None,
     ) -> CycleResult:
-        """One cycle.
+        """One cycle; returns the command to send and what led to it.
 
-        tau_d (k,): demanded wrench. w (k,): actuator wrench measured over the last
-        estimation interval, or None when there is no new sample (estimates held; the
-        excitation does not advance). u_sample (m,): the command that was acting over that
-        interval (its time average); defaults to the last command. dt_s: time since the last
-        cycle for the rate limits; defaults to the configured period.
+        tau_d (k,): demanded wrench, body frame. w: the last estimation interval's sample,
+        an :class:`Observation` (or, for the windowed and literal estimators, the actuator
+        wrench (k,) already inverted from it), or None when there is no new sample
+        (estimates held; the excitation does not advance). u_sample (m,): the command that
+        was acting over that interval (its time average); defaults to the last command.
+        dt_s: time since the last cycle for the rate limits; defaults to the configured
+        period. truth: the true faults, needed in ``ORACLE`` mode only (ValueError without).
+        forced_dead (m,): thrusters known failed from outside (a silent ESC): allocated
+        exactly 0, flagged faulty.
         """
         u_sample = self.u_prev if u_sample is None else u_sample
-        if w is not None and not math.isfinite(w.sum()):
+        if w is not None and not _finite(w):
             w = None  # no sample: non-finite (or so large that its sum overflows)
-        self._estimate = est = self._estimate_for(w, u_sample, truth)
-        if forced_dead is not None and forced_dead.any():
-            est = replace(est, delta_hat=np.where(forced_dead, 0.0, est.delta_hat))
-        dead = est.delta_hat < self.config.allocator.dead_threshold
+        if self._unsized and isinstance(w, Observation) and w.finite():
+            self._size_excitation(w.dt_s)
+        out = self.stage.update(w, u_sample, truth)
+        delta, bf = out.delta_alloc, out.bf_alloc
+        dead_ext = np.zeros(self.m, dtype=bool) if forced_dead is None else forced_dead
+        forced = bool(dead_ext.any())
+        if forced:
+            delta = np.where(dead_ext, 0.0, delta)
+        dead = delta < self.config.allocator.dead_threshold
+        u_pref, probe = None, None
         if self.config.mode is Mode.FTCAP:
-            exc = self.excitation(est.delta_hat, dead, advance=w is not None)
+            exc = self.excitation(delta, dead, advance=w is not None)
             u_pref, probe = exc.u_pref, exc.probe_limit
-            if forced_dead is not None and forced_dead.any():
+            if forced:
                 # Known failed from outside (silent ESC): no probing, no dither, exactly 0.
-                u_pref = np.where(forced_dead, 0.0, u_pref)
-                probe = np.where(forced_dead, 0.0, probe)
-        else:
-            u_pref, probe = None, None
-        alloc = self.allocator.allocate(
-            tau_d, est.delta_hat, est.bf_hat, self.u_prev, u_pref, probe, dt_s
-        )
+                u_pref = np.where(dead_ext, 0.0, u_pref)
+                probe = np.where(dead_ext, 0.0, probe)
+        alloc = self.allocator.allocate(tau_d, delta, bf, self.u_prev, u_pref, probe, dt_s)
         self.u_prev = alloc.u
-        probing = np.zeros(self.m, dtype=bool) if probe is None else probe > 0
+        est = out.estimate
+        if forced:
+            est = replace(est, delta_hat=np.where(dead_ext, 0.0, est.delta_hat))
         return CycleResult(
             alloc.u,
             est,
             alloc,
-            self._fault_flags(est, forced_dead),
-            probing,
+            out.faulty | dead_ext,
+            np.zeros(self.m, dtype=bool) if probe is None else probe > 0,
             estimation_frozen=self.config.mode.estimates and w is None,
+            decision=out.decision,
         )
-
-    def _fault_flags(self, est: Estimate, forced_dead: BoolArray | None) -> BoolArray:
-        cfg = self.config
-        determined = self.config.mode is Mode.ORACLE or est.window_len >= self.m + self.k
-        if determined:
-            d = est.delta_hat
-            self._faulty = np.where(self._faulty, d < cfg.fault_clear, d < cfg.fault_threshold)
-        flags = self._faulty.copy()
-        if forced_dead is not None:
-            flags |= forced_dead
-        return flags
 
     def retune(
         self, allocator: AllocatorConfig | None = None, excitation: ExcitationConfig | None = None

@@ -21,7 +21,7 @@ samples cannot bias the new estimate.
 
 ``LiteralEstimator`` is the paper read literally: step 1 puts the whole residual of the last
 step into the bias (eq. 9), so the slack of eq. (11) is zero at Gamma = 0 and Delta_hat never
-leaves its initial value. It is kept for comparison; tests pin that finding.
+leaves its initial value (docs/algorithm.md). It is kept for comparison.
 """
 
 from __future__ import annotations
@@ -36,6 +36,9 @@ from ftcap_hil.core.messages import FloatArray
 
 
 class EstimatorKind(enum.Enum):
+    """Which estimator mode ``ftcap`` runs (``ftcap-literal`` always runs the literal one)."""
+
+    KALMAN = "kalman"
     WINDOWED = "windowed"
     LITERAL = "literal"
 
@@ -54,12 +57,45 @@ class EstimatorConfig:
     # onset on a continuous-time plant; a discrete-time plant has no such sample).
     evict_straddling: bool = True
     # Pole a of the first-order low-pass (1 - a) / (1 - a q^-1) applied alike to the command
-    # and the measured wrench before the fit (0: off). Less velocity noise, but it also
-    # attenuates the dither and probes against model error: measured trade-off in
-    # docs/algorithm.md, hence off by default.
+    # and the measured wrench before the fit (0: off). Off by default: it also attenuates the
+    # dither and probes against model error (docs/algorithm.md, the prefilter).
     prefilter: float = 0.0
+    # --- kind = "kalman" (core/kalman.py, core/decisions.py) ---
+    kind: str = "kalman"  # "kalman" | "windowed"
+    # Sensor noise std of the plant's dynamic state (u, v, r in m/s, m/s, rad/s for a
+    # vessel), as the data sheet gives it; None: a noise-free world (1e-6).
+    measurement_std: tuple[float, ...] | None = None
+    model_error: float = 0.002  # process noise on s: this fraction of S, through G
+    adapt_s: float = 30.0  # time constant of the process-noise scale learnt online (0: off)
+    # Which part of the estimated bias b the allocator compensates: "attributed" (only what
+    # core/decisions.py attributes to a thruster; the environment is the controller's) or
+    # "all" (the paper's model: every bias is a thruster's).
+    bias_compensation: str = "attributed"
+    q_delta: float = 0.002  # random walk of delta, per sqrt(s)
+    q_bias_rel: float = 0.002  # random walk of b, fraction of S per sqrt(s)
+    initial_delta_std: float = 0.05
+    initial_bias_rel: float = 0.3
+    reset_std: float = 0.3  # delta std after a change alarm
+    reset_bias_rel: float = 0.3  # b std after a change alarm, fraction of S
+    cusum_drift: float = 3.0  # CUSUM on nis - k: allowance per sample
+    cusum_threshold: float = 25.0
+    isolation_margin: float = 2.71  # suspects: within this log-likelihood of the best
+    z_flag: float = 4.0  # one-sided confidence (in std) for a reported fault
+    z_use: float = 2.0  # the allocator uses delta_hat + z_use std (capped at 1)
+    practical_loss: float = 0.05  # 1 - delta_hat below this is never acted upon
+    removal_threshold: float = 0.3  # a fault confidently below this is taken out
+    observable_std: float = 0.1  # delta std the recent window alone must reach
+    bias_min_rel: float = 0.03  # smallest thruster bias acted upon, fraction of its range
+    bias_base_s: float = 60.0  # time constant of the healthy bias baseline (environment)
 
     def __post_init__(self) -> None:
+        if self.bias_compensation not in ("attributed", "all"):
+            raise ValueError(
+                "estimator.bias_compensation: expected 'attributed' or 'all', got "
+                f"{self.bias_compensation!r}"
+            )
+        if self.kind not in ("kalman", "windowed"):
+            raise ValueError(f"estimator.kind: expected 'kalman' or 'windowed', got {self.kind!r}")
         if self.window < 2:
             raise ValueError(f"estimator.window: need >= 2, got {self.window}")
         if not 0.0 <= self.prefilter < 1.0:
@@ -71,24 +107,33 @@ class EstimatorConfig:
 
 @dataclass(frozen=True)
 class Estimate:
+    """One fault estimate: effectiveness, bias (as a wrench and per thruster) and window
+    diagnostics (``innovation`` normalized by S; ``window_len`` samples in the window;
+    ``restarted`` whether this sample restarted it)."""
+
     delta_hat: FloatArray  # (m,) effectiveness in [0, 1]
     bf_hat: FloatArray  # (k,) B f, generalized force (N, N, N*m)
     f_hat: FloatArray  # (m,) minimum-norm per-thruster bias (N)
     innovation: float = 0.0  # normalized one-step prediction error before the update
     window_len: int = 0
     restarted: bool = False
+    delta_std: FloatArray | None = None  # (m,) standard deviation of delta_hat (None: unknown)
 
 
 def wrench_scale(B: FloatArray, u_min: FloatArray, u_max: FloatArray) -> FloatArray:
-    """Largest achievable |tau_j| per axis, sum_i |B_ji| max(|u_min_i|, |u_max_i|)."""
+    """S (k,): largest achievable |tau_j| per axis, sum_i |B_ji| max(|u_min_i|, |u_max_i|)."""
     return np.abs(B) @ np.maximum(np.abs(u_min), np.abs(u_max))
 
 
 class WindowedEstimator:
-    """See the module docstring. The normal equations are running sums: each sample's
-    contribution Phi_j^T Phi_j, Phi_j^T w_j is stored in a ring buffer, added on arrival and
-    subtracted on eviction, and the sums are rebuilt from the buffer once per window so that
-    rounding cannot accumulate. A restart zeroes the buffer."""
+    """Joint windowed estimate of delta (m,) and b = B f (k,) (module docstring).
+
+    ``B`` (k, m) effectiveness matrix, ``scale`` (k,) S per axis (:func:`wrench_scale`).
+    The normal equations are running sums: each sample's contribution Phi_j^T Phi_j,
+    Phi_j^T w_j is stored in a ring buffer, added on arrival and subtracted on eviction, and
+    the sums are rebuilt from the buffer once per window so that rounding cannot accumulate.
+    A restart zeroes the buffer.
+    """
 
     def __init__(self, B: FloatArray, scale: FloatArray, config: EstimatorConfig | None = None):
         import daqp
@@ -137,12 +182,15 @@ class WindowedEstimator:
         self._count = self._since_restart = 0
 
     def reset(self, delta: FloatArray | None = None, bf: FloatArray | None = None) -> None:
+        """Empty the window and start from ``delta`` (m,) and ``bf`` (k,) (default 1 and 0)."""
         self.theta = np.concatenate(
             [np.ones(self._m) if delta is None else delta, np.zeros(self._k) if bf is None else bf]
         )
         self._restart()
 
     def update(self, u: FloatArray, w: FloatArray) -> Estimate:
+        """Add one sample and re-fit: ``u`` (m,) the command (N) applied over the step,
+        ``w`` (k,) the actuator wrench measured over it (N, N, N*m); both finite."""
         m = self._m
         pred = self._B @ (self.theta[:m] * u) + self.theta[m:]
         e = float(np.abs((w - pred) / self._s).max())
@@ -170,12 +218,8 @@ class WindowedEstimator:
             u, w = self._uf, self._wf
         self._add_sample(u, w, e)
         if restarted and self.config.evict_straddling:
-            # The sample that shows the jump usually straddles the onset (part healthy, part
-            # faulty). Alone it gives the immediate reaction; it is evicted as soon as a clean
-            # sample arrives: fitted together with clean samples it is inconsistent with every
-            # (delta, b), and the few-sample fit then drove healthy delta_hat to ~0 (seen in HIL
-            # by tests/e2e; offline with exact fault timing: healthy thrusters took 5.8 s to
-            # recover in ex2-bias008, 1.0 s with the eviction).
+            # It straddles the onset: used alone now, evicted at the next clean sample (why:
+            # docs/decisions.md).
             self._provisional = (self._head - 1) % self.config.window
         self.theta = self._solve()
         return self.estimate(innovation=e, restarted=restarted)
@@ -218,13 +262,15 @@ class WindowedEstimator:
         return np.clip(theta, self._lo, self._hi)  # not reached in practice: H is PD
 
     def estimate(self, innovation: float = 0.0, restarted: bool = False) -> Estimate:
+        """The current estimate (copies), with the diagnostics handed in."""
         delta = self.theta[: self._m].copy()
         bf = self.theta[self._m :].copy()
         return Estimate(delta, bf, self._pinv @ bf, innovation, self._count, restarted)
 
 
 class LiteralEstimator:
-    """Eqs. (9)-(11) as printed (see module docstring)."""
+    """Eqs. (9)-(11) as printed (module docstring); ``B`` (k, m), ``scale`` (k,) as for
+    :class:`WindowedEstimator`."""
 
     def __init__(self, B: FloatArray, scale: FloatArray, config: EstimatorConfig | None = None):
         self.config = config or EstimatorConfig()
@@ -237,11 +283,13 @@ class LiteralEstimator:
         self._hist: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = []
 
     def reset(self, delta: FloatArray | None = None, bf: FloatArray | None = None) -> None:
+        """Forget the history and start from ``delta`` (m,) and ``bf`` (k,) (default 1, 0)."""
         self.delta = np.ones(self._m) if delta is None else delta.copy()
         self.bf = np.zeros(self._k) if bf is None else bf.copy()
         self._hist.clear()
 
     def update(self, u: FloatArray, w: FloatArray) -> Estimate:
+        """Steps 1 and 2 as printed for one sample: ``u`` (m,) N, ``w`` (k,) N / N*m."""
         # Step 1, eq. (9): B f_hat(t-1) = x(t) - A x(t-1) - B Delta_hat(t-1) u(t-1).
         self.bf = w - self._B @ (self.delta * u)
         self._hist.append((u, w, self.bf, self.delta.copy()))
@@ -257,11 +305,10 @@ class LiteralEstimator:
             g += Phi.T @ r
         gamma = np.linalg.solve(H, g)
         self.delta = np.clip(self.delta + gamma, 0.0, 1.0)
-        return Estimate(
-            self.delta.copy(), self.bf.copy(), self._pinv @ self.bf, 0.0, len(self._hist)
-        )
+        return self.estimate()
 
     def estimate(self) -> Estimate:
+        """The current estimate (copies)."""
         return Estimate(
             self.delta.copy(), self.bf.copy(), self._pinv @ self.bf, 0.0, len(self._hist)
         )

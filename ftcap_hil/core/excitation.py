@@ -26,14 +26,23 @@ from ftcap_hil.core.messages import BoolArray, FloatArray, IntArray
 
 @dataclass(frozen=True)
 class ExcitationConfig:
+    """Dither and probe settings (module docstring); ValueError on construction if invalid."""
+
     dither_amplitude: float = 0.03  # fraction of each thruster's range, largest component
     dither_period: int = 2  # cycles per PRBS level
     probe_amplitude: float = 0.1  # fraction of the range
-    probe_interval: int = 50  # cycles between probes of a dead thruster (0: never)
+    probe_interval: int = 10  # cycles between probes of a dead thruster (0: never)
     probe_length: int = 4  # cycles per probe
     seed: int = 0
+    # Sized to the noise (Kalman estimator): the dither and probe amplitudes are raised to
+    # what brings each delta_i ``info_rate`` units of Fisher information per second at the
+    # sensor's noise, up to ``amplitude_max`` (fractions of the range). 0: fixed amplitudes.
+    info_rate: float = 40.0
+    amplitude_max: float = 0.25
 
     def __post_init__(self) -> None:
+        if self.info_rate < 0 or not 0 <= self.amplitude_max <= 1:
+            raise ValueError("excitation: info_rate >= 0 and amplitude_max in [0, 1]")
         if self.dither_amplitude < 0 or self.probe_amplitude < 0:
             raise ValueError("excitation: amplitudes must be >= 0")
         if self.dither_period < 1 or self.probe_length < 1 or self.probe_interval < 0:
@@ -42,11 +51,19 @@ class ExcitationConfig:
 
 @dataclass(frozen=True)
 class ExcitationOutput:
+    """One cycle's excitation, per thruster (m,), in N."""
+
     u_pref: FloatArray  # (m,) preferred command (N)
     probe_limit: FloatArray  # (m,) amplitude a probed dead thruster may use (0: not probed)
 
 
 class Excitation:
+    """Null-space dither and recovery probes as a preferred command (module docstring).
+
+    ``B`` (k, m) effectiveness matrix; ``u_range`` (m,) each thruster's range in N
+    (max(|u_min|, |u_max|)), which the amplitudes are fractions of. Call once per cycle.
+    """
+
     def __init__(self, B: FloatArray, u_range: FloatArray, config: ExcitationConfig | None = None):
         self.config = config or ExcitationConfig()
         self._B = np.asarray(B, dtype=np.float64)

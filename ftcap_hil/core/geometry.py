@@ -40,6 +40,7 @@ class Thruster:
     step_max: float | None = None
 
     def column(self) -> FloatArray:
+        """This thruster's column of B (3,): [cos a, sin a, x sin a - y cos a] per N."""
         c, s = math.cos(self.angle_rad), math.sin(self.angle_rad)
         return np.array([c, s, self.x_m * s - self.y_m * c])
 
@@ -54,25 +55,32 @@ class Thruster:
 
 @dataclass(frozen=True)
 class ThrusterSet:
+    """The vessel's thrusters in vessel-file order (index i = column i of B)."""
+
     thrusters: tuple[Thruster, ...]
 
     @property
     def m(self) -> int:
+        """Number of thrusters."""
         return len(self.thrusters)
 
     @property
     def names(self) -> list[str]:
+        """Thruster names, in order."""
         return [t.name for t in self.thrusters]
 
     @property
     def u_min(self) -> FloatArray:
+        """(m,) lower amplitude limits (N)."""
         return np.array([t.u_min for t in self.thrusters])
 
     @property
     def u_max(self) -> FloatArray:
+        """(m,) upper amplitude limits (N)."""
         return np.array([t.u_max for t in self.thrusters])
 
     def max_step(self, dt_s: float) -> FloatArray:
+        """(m,) largest command change per cycle of length ``dt_s`` (N; inf: unlimited)."""
         return np.array([t.max_step(dt_s) for t in self.thrusters])
 
 

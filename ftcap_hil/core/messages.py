@@ -29,7 +29,9 @@ BoolArray = npt.NDArray[np.bool_]
 IntArray = npt.NDArray[np.intp]
 
 
-def _finite_vector(name: str, value: object, length: int | None = None) -> FloatArray:
+def finite_vector(name: str, value: object, length: int | None = None) -> FloatArray:
+    """``value`` as a 1-D float64 array (of ``length`` if given) with finite entries, else
+    MalformedMessage naming ``name``; what cannot be converted raises numpy's own error."""
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim != 1 or (length is not None and arr.shape[0] != length):
         raise MalformedMessage(
@@ -48,7 +50,8 @@ class WrenchSetpoint:
 
     @classmethod
     def checked(cls, tau: object) -> WrenchSetpoint:
-        return cls(_finite_vector("wrench", tau, 3))
+        """Validate ``tau`` (3 finite numbers) or raise MalformedMessage."""
+        return cls(finite_vector("wrench", tau, 3))
 
 
 @dataclass(frozen=True)
@@ -61,7 +64,8 @@ class Odometry:
 
     @classmethod
     def checked(cls, eta: object, nu: object, time_s: float = math.nan) -> Odometry:
-        return cls(_finite_vector("eta", eta, 3), _finite_vector("nu", nu, 3), float(time_s))
+        """Validate ``eta`` and ``nu`` (3 finite numbers each) or raise MalformedMessage."""
+        return cls(finite_vector("eta", eta, 3), finite_vector("nu", nu, 3), float(time_s))
 
 
 @dataclass(frozen=True)
@@ -72,7 +76,8 @@ class ThrusterCommand:
 
     @classmethod
     def checked(cls, u: object, m: int | None = None) -> ThrusterCommand:
-        return cls(_finite_vector("thruster command", u, m))
+        """Validate ``u`` (finite, length ``m`` if given) or raise MalformedMessage."""
+        return cls(finite_vector("thruster command", u, m))
 
 
 class FaultKind(enum.Enum):

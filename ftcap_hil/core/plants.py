@@ -34,9 +34,11 @@ class LinearPlant:
     state_labels: tuple[str, ...] = ("x",)
 
     def step(self, x: FloatArray, tau: FloatArray, dt_s: float) -> FloatArray:
+        """x(t+1) (1,) from x(t) (1,) and the actuator term tau (1,); one step (dt_s unused)."""
         return np.array([self.a * x[0] + self.b_v * tau[0]])
 
     def measured_wrench(self, x_prev: FloatArray, x_now: FloatArray, dt_s: float) -> FloatArray:
+        """w (1,) = B_v^-1 (x(t+1) - A x(t)): the actuator term that produced the step."""
         return np.array([(x_now[0] - self.a * x_prev[0]) / self.b_v])
 
 
@@ -55,6 +57,7 @@ class SurfaceVessel:
 
     @property
     def mass_matrix(self) -> FloatArray:
+        """M (3, 3) = diag(m, m, I_z) (kg, kg, kg*m^2)."""
         return np.diag([self.mass_kg, self.mass_kg, self.iz_kgm2])
 
     def drag_and_coriolis(self, nu: FloatArray) -> FloatArray:
@@ -77,6 +80,7 @@ class SurfaceVessel:
 
     @staticmethod
     def eta_dot(eta: FloatArray, nu: FloatArray) -> FloatArray:
+        """R(psi) nu (3,): NED velocities [north (m/s), east (m/s), psi rate (rad/s)]."""
         c, s = math.cos(eta[2]), math.sin(eta[2])
         return np.array([c * nu[0] - s * nu[1], s * nu[0] + c * nu[1], nu[2]])
 
@@ -114,8 +118,8 @@ class SurfaceVessel:
 
         "euler" inverts the paper's discrete model exactly (drag and Coriolis at nu(t)).
         "trapezoid" averages them over the step: second-order accurate for the
-        continuous-time vessel, ~50x smaller error against an RK4 truth in example 1, but
-        itself a mismatch when the truth *is* the Euler model.
+        continuous-time vessel (docs/algorithm.md, model mismatch), but itself a mismatch
+        when the truth *is* the Euler model.
         """
         nu0, nu1 = x_prev[3:], x_now[3:]
         inertial = np.array([self.mass_kg, self.mass_kg, self.iz_kgm2]) * (nu1 - nu0) / dt_s

@@ -9,8 +9,8 @@ A failed solve is data (``BoxQpSolution.found = False``), never an exception. Ba
   from the previous result. proxsuite 0.8 segfaults when ``initial_guess`` is changed after
   ``init()`` or when ``update()`` precedes the first ``solve()``: the option is set before
   ``init()`` and the first problem is solved immediately.
-* ``daqp``: the dual active-set solver through its C entry point (no persistent object in
-  its Python API, but a call is cheap).
+* ``daqp`` (the default, ``AllocatorConfig.backend``): the dual active-set solver through its
+  C entry point (no persistent object in its Python API, but a call is cheap).
 * ``qpsolvers:<name>``: a one-shot ``qpsolvers.solve_qp`` per call. Slower (it rebuilds the
   problem each time); used as the cross-check in tests and as the benchmark baseline.
 """
@@ -30,17 +30,22 @@ _BIG = 1e20  # stands for an infinite bound in backends that want finite numbers
 
 @dataclass(frozen=True)
 class BoxQpSolution:
+    """A solve's outcome: ``x`` (n,) inside [lo, hi] when ``found``, else whatever the
+    backend returned (possibly NaN), and the backend's iteration count."""
+
     x: FloatArray
     found: bool
     iterations: int = 0
 
 
 class BoxQpSolver(Protocol):
+    """A box-QP backend (module docstring); ``name`` as given to :func:`make_solver`."""
+
     name: str
 
-    def solve(
-        self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray
-    ) -> BoxQpSolution: ...
+    def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
+        """Minimize 1/2 x^T H x + g^T x over lo <= x <= hi; H (n, n), g, lo, hi (n,)."""
+        ...
 
 
 def _accepted(
@@ -48,7 +53,7 @@ def _accepted(
 ) -> BoxQpSolution:
     """x clipped to [lo, hi] if it is finite and inside [lo - tol, hi + tol], else not found
     (a NaN propagates through maximum/minimum and fails the comparison). minimum(maximum())
-    rather than np.clip: the same result at a third of the cost on 4-vectors."""
+    rather than np.clip: the same result, cheaper on short vectors."""
     clipped = np.minimum(np.maximum(x, lo), hi)
     if np.abs(x - clipped).max(initial=0.0) <= tol:
         return BoxQpSolution(clipped, True, iterations)
@@ -56,6 +61,8 @@ def _accepted(
 
 
 class ProxqpBoxSolver:
+    """One persistent proxsuite dense QP of size ``n``, warm-started (module docstring)."""
+
     name = "proxqp"
 
     def __init__(self, n: int, eps_abs: float = 1e-9, max_iter: int = 1000) -> None:
@@ -77,10 +84,8 @@ class ProxqpBoxSolver:
         qp.settings.eps_abs = self._eps_abs
         qp.settings.eps_rel = 0.0
         qp.settings.max_iter = self._max_iter
-        qp.settings.max_iter_in = 200  # default 1500 inner iterations per outer one
-        # Without the duality-gap check a warm start whose old x and multipliers still pass
-        # the residual tests after a bounds-only update is reported solved at iteration 0
-        # (a rate-limited ramp then freezes): found by tests/unit.
+        qp.settings.max_iter_in = 200  # default 1500: a hopeless solve would take seconds
+        # Without it a warm start after a bounds-only update may return its stale x.
         qp.settings.check_duality_gap = True
         qp.settings.verbose = False
         qp.init(H, g, None, None, None, None, None, lo, hi)
@@ -90,9 +95,9 @@ class ProxqpBoxSolver:
         self._H_tol = 1e-9 * np.abs(H).max()
 
     def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
+        """Warm-started solve (as :meth:`BoxQpSolver.solve`); cold restart if it fails."""
         if self._qp is not None:
-            # proxsuite re-does its set-up whenever H is passed (~50 us here); the estimates
-            # behind H move by ~1e-9 per cycle in steady state, so only pass a changed H
+            # proxsuite re-does its set-up whenever H is passed: only pass an H that changed
             # (the allocator hands back the very same array while delta_hat holds still).
             Hn = None
             if H is not self._H and np.abs(H - self._H).max() > self._H_tol:
@@ -103,8 +108,7 @@ class ProxqpBoxSolver:
             sol = self._result(lo, hi)
             if sol.found:
                 return sol
-        # No workspace yet, or the warm start stalled (seen with cond(H) ~ 1e5 when the
-        # active set changes a lot): a cold start from a fresh workspace.
+        # No workspace yet, or the warm start stalled: a cold start from a fresh workspace.
         self._fresh(H, g, np.maximum(lo, -_BIG), np.minimum(hi, _BIG))
         sol = self._result(lo, hi)
         if not sol.found:
@@ -121,7 +125,14 @@ class ProxqpBoxSolver:
 
 
 class DaqpBoxSolver:
+    """daqp's dual active-set solver for box QPs of size ``n`` (no persistent workspace)."""
+
     name = "daqp"
+
+    # daqp's own primal feasibility tolerance (its default): an answer it reports optimal
+    # may sit this far outside a bound, so acceptance uses the same figure (relative to the
+    # bounds' size), then clips. A stricter acceptance threw optimal answers away.
+    PRIMAL_TOL = 1e-6
 
     def __init__(self, n: int) -> None:
         import daqp
@@ -132,14 +143,18 @@ class DaqpBoxSolver:
         self._sense = np.zeros(n, dtype=np.int32)
 
     def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
+        """One daqp call (as :meth:`BoxQpSolver.solve`); infinite bounds become +-1e20."""
+        hi_f, lo_f = np.minimum(hi, _BIG), np.maximum(lo, -_BIG)
         x, _fval, exitflag, info = self._daqp.solve(
-            H, g, self._A, np.minimum(hi, _BIG), np.maximum(lo, -_BIG), self._sense
+            H, g, self._A, hi_f, lo_f, self._sense, primal_tol=self.PRIMAL_TOL
         )
         x = np.asarray(x, dtype=np.float64)
         iterations = int(info.get("iterations", 0)) if isinstance(info, dict) else 0
         if exitflag < 1:
             return BoxQpSolution(x, False, iterations)
-        return _accepted(x, lo, hi, 1e-7, iterations)
+        bounds = np.abs(np.concatenate([hi_f, lo_f]))
+        size = max(1.0, float(np.max(bounds[bounds < _BIG], initial=0.0)))
+        return _accepted(x, lo, hi, self.PRIMAL_TOL * size, iterations)
 
 
 class QpsolversBoxSolver:
@@ -153,6 +168,7 @@ class QpsolversBoxSolver:
         self.name = f"qpsolvers:{solver}"
 
     def solve(self, H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> BoxQpSolution:
+        """One ``qpsolvers.solve_qp`` call (as :meth:`BoxQpSolver.solve`), tolerance 1e-5."""
         x = self._solve_qp(H, g, lb=lo, ub=hi, solver=self._solver)
         if x is None:
             return BoxQpSolution(np.full_like(g, np.nan), False)
@@ -167,6 +183,7 @@ _BACKENDS: dict[str, Callable[[int], BoxQpSolver]] = {
 
 
 def available_backends() -> list[str]:
+    """Backend names :func:`make_solver` accepts here (the qpsolvers ones as installed)."""
     import qpsolvers
 
     return sorted(_BACKENDS) + [f"qpsolvers:{s}" for s in qpsolvers.available_solvers]

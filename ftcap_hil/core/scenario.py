@@ -5,7 +5,9 @@ The type only; ``ftcap_hil.config.scenario`` reads it from TOML (docs/scenarios.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -16,6 +18,7 @@ from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.status import Mode
+from ftcap_hil.core.vessel3dof import Vessel3DOF
 
 
 @dataclass(frozen=True)
@@ -28,9 +31,17 @@ class Segment:
 
 @dataclass(frozen=True)
 class Scenario:
+    """One offline closed-loop run (docs/scenarios.md): the plant (linear, state x (1,), or
+    the surface vessel, x = [eta (3, NED), nu (3, body)]), its thrusters and B (k, m), the
+    step ``dt_s`` and ``duration_s`` (s; steps when ``time_unit`` is "step"), the initial
+    state ``x0``, the nominal controller and its piecewise-constant reference, the true
+    faults, the allocator core's settings, the truth's integrator and the state noise
+    (``noise_std``, per state component, with ``seed``).
+    """
+
     name: str
     description: str
-    plant: LinearPlant | SurfaceVessel
+    plant: LinearPlant | SurfaceVessel | Vessel3DOF
     thrusters: ThrusterSet
     B: FloatArray  # (k, m)
     dt_s: float
@@ -45,12 +56,19 @@ class Scenario:
     noise_std: FloatArray = field(default_factory=lambda: np.zeros(0))
     seed: int = 0
     time_unit: str = "s"  # "step" for the discrete linear plant
+    # The vessel's truth when it is not the allocator's plant: a sim.truth.TruthConfig
+    # (realistic scenarios, config/realistic.py); None: the paper's world, where the truth
+    # is ``plant`` itself integrated by ``integrator``.
+    truth: Any = None
+    length_m: float = math.nan  # the vessel's length overall (m), NaN: not stated
 
     @property
     def steps(self) -> int:
+        """Number of steps of the run."""
         return int(round(self.duration_s / self.dt_s))
 
     def reference_at(self, t: float) -> FloatArray:
+        """The reference in force at ``t``: the last segment that started at or before it."""
         value = self.reference[0].value
         for seg in self.reference:
             if seg.start <= t:
@@ -64,4 +82,5 @@ class Scenario:
         return list(zip(bounds[:-1], bounds[1:], strict=True))
 
     def with_mode(self, mode: Mode) -> Scenario:
+        """The same scenario with the allocator core in ``mode``."""
         return replace(self, core=replace(self.core, mode=mode))

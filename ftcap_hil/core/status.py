@@ -16,6 +16,8 @@ from dataclasses import dataclass, fields
 
 
 class Mode(enum.Enum):
+    """How the allocator core treats faults (its estimator, or none); values as in config."""
+
     NONE = "none"  # reference run: no faults injected, allocator as CAP
     CAP = "cap"  # allocation without estimation (Delta_hat = I, f_hat = 0)
     FTCAP = "ftcap"  # windowed joint estimation (default)
@@ -24,6 +26,7 @@ class Mode(enum.Enum):
 
     @property
     def estimates(self) -> bool:
+        """The mode runs a fault estimator."""
         return self in (Mode.FTCAP, Mode.FTCAP_LITERAL)
 
 
@@ -41,7 +44,9 @@ class AllocatorStatus:
 
     Wrenches (3,) are [X (N), Y (N), N (N*m)]: ``tau_demand`` the demand, ``unallocated``
     the demand minus what the allocation plans to produce, ``bf_hat`` the estimated bias
-    B f_hat. Per thruster (m,): ``delta_hat`` effectiveness in [0, 1], ``f_hat`` bias (N),
+    B f_hat. Per thruster (m,): ``delta_hat`` effectiveness in [0, 1] with its standard
+    deviation ``delta_std`` and whether the recent data determine it (``observable``),
+    ``f_hat`` bias (N),
     ``u`` last command (N), flags ``saturated`` (at an amplitude or rate limit), ``faulty``
     (flagged by the estimator), ``esc_failed`` (ESC silent), ``probing`` (recovery probe),
     ESC telemetry ``esc_rpm``, ``esc_current_a`` (NaN: never reported), ``esc_age_s``
@@ -56,6 +61,8 @@ class AllocatorStatus:
     telemetry_stale: bool = False
     estimation_frozen: bool = False
     delta_hat: tuple[float, ...] = ()
+    delta_std: tuple[float, ...] = ()  # standard deviation of delta_hat (0: the truth/CAP)
+    observable: tuple[bool, ...] = ()  # the recent data determine delta_i
     f_hat: tuple[float, ...] = ()
     bf_hat: tuple[float, ...] = ()
     u: tuple[float, ...] = ()

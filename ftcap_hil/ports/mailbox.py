@@ -21,6 +21,8 @@ T = TypeVar("T")
 
 @dataclass
 class Stamped(Generic[T]):
+    """A value and its arrival stamp (``time.monotonic_ns()`` unless handed in)."""
+
     value: T
     stamp_ns: int
 
@@ -29,8 +31,9 @@ class Stamped(Generic[T]):
 class Mailbox(Generic[T]):
     """Latest-value slot written by library callbacks, read by the loop thread.
 
-    Callbacks never run allocator code: they validate, then ``put``. The loop ``take``s the
-    latest value with its age. Counters let the status report drops per port.
+    Callbacks never run allocator code: they validate, then ``put``. The loop reads the
+    latest value (:meth:`latest`, not consumed) and its age (:meth:`age_s`). Counters let the
+    status report drops per port.
     """
 
     name: str
@@ -41,6 +44,8 @@ class Mailbox(Generic[T]):
     notify: threading.Event | None = None  # set on every put: wakes the loop early
 
     def put(self, value: T, stamp_ns: int | None = None) -> None:
+        """Replace the latest value (stamped now unless ``stamp_ns`` is given); sets
+        ``notify``."""
         stamped = Stamped(value, time.monotonic_ns() if stamp_ns is None else stamp_ns)
         with self._lock:
             self._slot = stamped
@@ -49,10 +54,12 @@ class Mailbox(Generic[T]):
             self.notify.set()
 
     def count_malformed(self) -> None:
+        """Count one input that was dropped as malformed before reaching the slot."""
         with self._lock:
             self.malformed += 1
 
     def latest(self) -> Stamped[T] | None:
+        """The latest value with its stamp, or None if nothing arrived yet (not consumed)."""
         with self._lock:
             return self._slot
 
@@ -83,6 +90,8 @@ class EventQueue(Generic[T]):
         self._lock = threading.Lock()
 
     def put(self, value: T, stamp_ns: int | None = None) -> None:
+        """Append one event (stamped now unless ``stamp_ns`` is given); a full queue drops
+        its oldest item and counts it in ``overflowed``."""
         stamped = Stamped(value, time.monotonic_ns() if stamp_ns is None else stamp_ns)
         with self._lock:
             if len(self._queue) == self.maxlen:
@@ -91,6 +100,7 @@ class EventQueue(Generic[T]):
             self.received += 1
 
     def count_malformed(self) -> None:
+        """Count one input that was dropped as malformed before reaching the queue."""
         with self._lock:
             self.malformed += 1
 

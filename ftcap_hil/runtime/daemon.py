@@ -34,6 +34,7 @@ import numpy as np
 
 from ftcap_hil.core.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
+from ftcap_hil.core.estimation import Observation
 from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
 from ftcap_hil.core.plants import SurfaceVessel
@@ -197,7 +198,7 @@ class AllocatorDaemon:
 
     def _make_core(self, core_cfg: CoreConfig) -> FtcapCore:
         dt = 1.0 / self.config.rate_hz
-        return FtcapCore(self.config.B, self.config.thrusters, dt, core_cfg)
+        return FtcapCore(self.config.B, self.config.thrusters, dt, core_cfg, self.config.plant)
 
     # --- called from other threads -----------------------------------------------------
 
@@ -397,7 +398,7 @@ class AllocatorDaemon:
             return None, None
         x0 = np.concatenate([prev[1].eta, prev[1].nu])
         x1 = np.concatenate([odom.eta, odom.nu])
-        return self.config.plant.measured_wrench(x0, x1, dt), u_mean
+        return Observation(x0, x1, dt), u_mean
 
     def _transition(
         self, key: str, value: bool, on: str, off: str, on_severity: Severity = Severity.WARNING
@@ -429,7 +430,7 @@ class AllocatorDaemon:
         for sink in self.ports.status:
             sink.announce(text, severity)
 
-    def _esc_fields(self, now: int) -> dict[str, tuple[float, ...]]:
+    def _esc_fields(self, now: int) -> dict[str, Any]:
         if self.ports.esc_latest is None or self.ports.esc_ages is None:
             return {}
         latest = self.ports.esc_latest()

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable
+from dataclasses import replace
 
 import numpy as np
 
 from ftcap_hil.core.cycle import FtcapCore
+from ftcap_hil.core.estimation import Observation
 from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.plants import LinearPlant
@@ -42,6 +44,18 @@ def exact_fault_step(
     return x
 
 
+def told_sensor_noise(sc: Scenario) -> Scenario:
+    """The scenario with the estimator told the sensor's noise level, as an operator sets it
+    from the data sheet: ``[estimator] measurement_std`` defaults to the ``[noise]`` std of
+    the plant's dynamic state (u, v, r for a vessel)."""
+    est = sc.core.estimator
+    if est.measurement_std is not None or not np.any(sc.noise_std > 0):
+        return sc
+    dyn = sc.noise_std[3:6] if sc.noise_std.size == 6 else sc.noise_std[:1]
+    est = replace(est, measurement_std=tuple(float(v) for v in dyn))
+    return replace(sc, core=replace(sc.core, estimator=est))
+
+
 def run_mode(
     sc: Scenario, mode: Mode, progress: bool = False, exact_faults: bool = True
 ) -> RunRecord:
@@ -49,7 +63,7 @@ def run_mode(
     vessel (the paper's 12 s onset falls 0.45 T_s into a step); False applies faults per
     step (zero-order hold), which hides the sample that straddles an onset."""
     sc = sc.with_mode(mode)
-    core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, sc.core)
+    core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, told_sensor_noise(sc).core, sc.plant)
     faults = FaultSchedule(sc.thrusters.m) if mode is Mode.NONE else sc.faults
     rng = np.random.default_rng(sc.seed)
     noisy = bool(np.any(sc.noise_std > 0))
@@ -64,7 +78,7 @@ def run_mode(
     for k in steps:
         t = k * sc.dt_s
         x_meas = x + rng.normal(0.0, sc.noise_std) if noisy else x
-        w = None if x_meas_prev is None else sc.plant.measured_wrench(x_meas_prev, x_meas, sc.dt_s)
+        w = None if x_meas_prev is None else Observation(x_meas_prev, x_meas, sc.dt_s)
         ref = sc.reference_at(t)
         tau_d = sc.controller(x_meas, ref)
         truth = faults.at(t)

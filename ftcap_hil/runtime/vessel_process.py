@@ -10,11 +10,9 @@ Each step, on absolute wall-clock deadlines at ``sim.rate_hz``::
 
 A step that runs late integrates the time that really passed, in whole nominal steps (up to
 ``MAX_CATCH_UP_STEPS``; a longer stall loses the excess, counted in ``lost_s``): the plant
-keeps real time as a boat does when its computer is busy, and sim time stays on the grid of
-nominal steps. One nominal step per late step instead slowed the plant down under load (a
-qemu TCG run: 185 overruns in 348 steps, sim time at 65 % of wall time) and weighted each
-step's command by sim time while the allocator weights it by wall time, a residual that the
-estimator read as a fault.
+keeps real time as a boat does when its computer is busy, sim time stays on the grid of
+nominal steps, and each command is weighted by the time it really acted, as the allocator
+weights it (docs/decisions.md).
 
 Odometry carries the sim time in ``Odometry.time_s``. Configuration: the shipped
 ``ftcap_hil/data/hil/vessel.toml`` (or ``--config``) plus ``--set SECTION.KEY=VALUE``.

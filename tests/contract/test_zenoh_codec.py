@@ -50,6 +50,8 @@ def status_four_thrusters(**changes: object) -> AllocatorStatus:
         unallocated=(0.0, 1.5, 0.0),
         saturated=(False, True, False, False),
         faulty=(False, False, True, False),
+        delta_std=(0.01, 0.02, 0.05, 0.01),
+        observable=(True, True, False, True),
         setpoint_age_s=0.012,
         telemetry_stale=True,
         esc_rpm=(100.0, math.nan, 0.0, -50.0),
@@ -147,7 +149,7 @@ def test_status_payload_names_wrenches_and_nulls_infinite_ages() -> None:
 def test_a_v1_status_without_the_later_fields_decodes() -> None:
     obj = json.loads(encode_status(status_four_thrusters()))
     for key in ("tau_demand", "faulty", "esc_failed", "probing", "malformed", "esc_rpm",
-                "esc_current_A", "estimation_frozen"):  # fmt: skip
+                "esc_current_A", "estimation_frozen", "delta_std", "observable"):  # fmt: skip
         del obj[key]
     back = decode_status(json.dumps(obj).encode())
     assert back.faulty == () and back.tau_demand == () and back.malformed == 0

@@ -107,7 +107,9 @@ def test_limit_wrench_keeps_the_direction() -> None:
     assert limit_wrench(small, (3.0, 3.0, 0.6)) is small
 
 
-STATUS = AllocatorStatus(delta_hat=(0.9, 1.0, 1.0, 1.0), f_hat=(0.01, 0.0, 0.0, 0.0), degraded=True)
+_STATUS = AllocatorStatus(
+    delta_hat=(0.9, 1.0, 1.0, 1.0), f_hat=(0.01, 0.0, 0.0, 0.0), degraded=True
+)
 
 
 def test_flight_record_has_the_simulator_columns_and_truth() -> None:
@@ -117,7 +119,7 @@ def test_flight_record_has_the_simulator_columns_and_truth() -> None:
     x0 = np.array([0.0, 0.0, 3.1, 0.0, 0.0, 0.0])
     x1 = np.array([0.1, 0.0, -3.1, 0.0, 0.0, 0.0])  # heading crossed +-pi
     rec.add(0.0, x0, np.zeros(3), np.zeros(3), None, None)
-    rec.add(13.0, x1, np.array([2.0, 0, 0]), np.array([0.5, 0, 0]), STATUS, u)
+    rec.add(13.0, x1, np.array([2.0, 0, 0]), np.array([0.5, 0, 0]), _STATUS, u)
     run = rec.finish("ftcap", mission.period_s, source="test")
     assert list(run.columns) == column_names(mission.scenario)
     c = {k: v[1] for k, v in run.columns.items()}

@@ -1,4 +1,5 @@
-"""FtcapCore per mode on the paper vessel, with synthetic measured wrenches."""
+"""FtcapCore per mode on the paper vessel, with synthetic measured wrenches (the windowed
+estimator works on wrenches; the Kalman estimator's own tests are in test_kalman.py)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import pytest
 
 from ftcap_hil.core.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
+from ftcap_hil.core.estimator import EstimatorConfig
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.geometry import command_bounds, effectiveness, paper_four_thrusters
 from ftcap_hil.core.status import Mode
@@ -18,8 +20,11 @@ TRUTH = Truth(np.array([0.7, 1.0, 1.0, 0.9]), np.array([0.0, 0.005, 0.0, 0.0]))
 TAU_D = np.array([0.05, 0.02, 0.005])
 
 
+WINDOWED = EstimatorConfig(kind="windowed")
+
+
 def make(mode: Mode) -> FtcapCore:
-    return FtcapCore(B, THS, DT_S, CoreConfig(mode=mode))
+    return FtcapCore(B, THS, DT_S, CoreConfig(mode=mode, estimator=WINDOWED))
 
 
 def run(core: FtcapCore, cycles: int, truth: Truth = TRUTH) -> list:

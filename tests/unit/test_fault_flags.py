@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
+from ftcap_hil.core.estimator import EstimatorConfig
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.status import Mode
@@ -40,7 +41,8 @@ def test_forced_dead_is_reported_faulty_without_touching_the_state() -> None:
 def test_windowed_flags_wait_for_a_determined_estimate() -> None:
     ths = paper_four_thrusters()
     B = effectiveness(ths)
-    core = FtcapCore(B, ths, 0.2827, CoreConfig(mode=Mode.FTCAP))
+    cfg = CoreConfig(mode=Mode.FTCAP, estimator=EstimatorConfig(kind="windowed"))
+    core = FtcapCore(B, ths, 0.2827, cfg)
     rng = np.random.default_rng(0)
     flags = []
     for _ in range(30):

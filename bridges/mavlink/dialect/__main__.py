@@ -13,6 +13,7 @@ from bridges.mavlink.dialect import load, render
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Write the module (``--out DIR``) or fill the cache; print the path; return 0."""
     parser = argparse.ArgumentParser(prog="python -m bridges.mavlink.dialect")
     parser.add_argument("--out", type=Path, help="write ftcap.py into this directory")
     args = parser.parse_args(argv)

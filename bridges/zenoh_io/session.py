@@ -1,0 +1,274 @@
+"""The Zenoh session under every ftcap link: checked configs and the shared link lifecycle.
+
+:class:`ZenohLink` owns one session opened from a checked config (see
+:mod:`bridges.zenoh_io.config`), declares publishers and subscribers once, and is closed by an
+idempotent ``shutdown()`` (or by leaving its ``with`` block). Subscriber callbacks run on
+zenoh-python's threads, only decode, then ``put`` into a
+:class:`~ftcap_hil.ports.mailbox.Mailbox` (or an ``EventQueue``); a payload that fails to
+decode is counted there (``malformed``) and dropped, never raised. Publishing returns False
+instead of raising when encoding or the session fails, so the caller's loop can mark the port
+stale and carry on; failures are logged on transitions only. The role links built on it are
+in :mod:`bridges.zenoh_io.link`; this package is the only place that imports zenoh.
+"""
+
+from __future__ import annotations
+
+import atexit
+import json
+import logging
+import threading
+import time
+import weakref
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, Protocol, Self, TypeVar
+
+import zenoh
+
+from bridges.zenoh_io.codec import ZenohKeys
+from bridges.zenoh_io.config import (
+    CHECKED_KEYS,
+    DEFAULT_PORT,
+    LOOPBACK,
+    ZenohConfigError,
+    ZenohRole,
+    check_settings,
+    parse_override,
+    role_settings,
+    shipped_config_path,
+)
+from ftcap_hil.core.errors import MalformedMessage, PortError
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+T_contra = TypeVar("T_contra", contravariant=True)
+JSON_ENCODING = zenoh.Encoding.APPLICATION_JSON
+
+
+class ZenohLinkError(PortError):
+    """The session could not be opened (router unreachable, port taken, ...)."""
+
+
+# --------------------------------------------------------------------------- configuration
+
+
+def apply_overrides(conf: zenoh.Config, overrides: Sequence[str] | Mapping[str, str]) -> None:
+    """Insert ``KEY:VALUE`` strings (as zenoh examples' ``--cfg``) or a key -> JSON5 mapping."""
+    pairs = overrides.items() if isinstance(overrides, Mapping) else map(parse_override, overrides)
+    for key, value in pairs:
+        try:
+            conf.insert_json5(key, value)
+        except zenoh.ZError as e:
+            raise ZenohConfigError(f"zenoh config key {key!r} = {value!r}: {e}") from e
+
+
+def validate_config(conf: zenoh.Config, source: str = "zenoh config") -> ZenohRole:
+    """Apply :func:`bridges.zenoh_io.config.check_settings` to a zenoh.Config; return its role."""
+    return check_settings({key: _get_json(conf, key) for key in CHECKED_KEYS}, source)
+
+
+def make_config(
+    role: ZenohRole | str,
+    port: int = DEFAULT_PORT,
+    host: str = LOOPBACK,
+    overrides: Sequence[str] = (),
+) -> zenoh.Config:
+    """A checked config: a router listening on ``tcp/host:port`` or a client/peer connecting."""
+    conf = zenoh.Config()
+    apply_overrides(conf, role_settings(role, port, host))
+    apply_overrides(conf, overrides)
+    validate_config(conf, f"{ZenohRole(role).value} config")
+    return conf
+
+
+def load_config(path: str | Path, overrides: Sequence[str] = ()) -> zenoh.Config:
+    """Load a JSON5 file, apply ``KEY:VALUE`` overrides, check it; ZenohConfigError if bad."""
+    try:
+        conf = zenoh.Config.from_file(str(path))
+    except zenoh.ZError as e:
+        raise ZenohConfigError(f"zenoh config file {path}: {e}") from e
+    apply_overrides(conf, overrides)
+    validate_config(conf, f"zenoh config {path}")
+    return conf
+
+
+def _get_json(conf: zenoh.Config, key: str) -> Any:
+    try:
+        return json.loads(conf.get_json(key))
+    except zenoh.ZError:
+        return None
+
+
+def _matched(publisher: zenoh.Publisher) -> bool:
+    # typed bool in the stubs, but zenoh 1.x returns a MatchingStatus (always truthy)
+    status = publisher.matching_status
+    return bool(getattr(status, "matching", status))
+
+
+# --------------------------------------------------------------------------- sinks
+
+
+class _Sink(Protocol[T_contra]):
+    """Where a subscriber's decoded samples go: a Mailbox or an EventQueue."""
+
+    def put(self, value: T_contra, stamp_ns: int | None = None) -> None:
+        """Take one decoded sample."""
+
+    def count_malformed(self) -> None:
+        """Count one sample that failed to decode."""
+
+
+# --------------------------------------------------------------------------- lifecycle
+
+# Links still open at exit are shut down before the interpreter joins zenoh's non-daemon
+# callback threads, which would otherwise hang it (docs/decisions.md).
+_OPEN_LINKS: weakref.WeakSet[ZenohLink] = weakref.WeakSet()
+
+
+def _shutdown_open_links() -> None:
+    for link in list(_OPEN_LINKS):
+        link.shutdown()
+
+
+getattr(threading, "_register_atexit", atexit.register)(_shutdown_open_links)
+
+
+class ZenohLink:
+    """Session lifecycle shared by the three links: open, declare, publish, shutdown.
+
+    ``vessel``: the key chunk of ``ftcap/<vessel>/...``; ``config``: a zenoh.Config (checked
+    here), or None for the role's shipped JSON5 file. ZenohLinkError if the session cannot be
+    opened, ZenohConfigError if the config is refused.
+    """
+
+    _shipped: str = ""
+
+    def __init__(self, vessel: str, config: zenoh.Config | None) -> None:
+        self.keys = ZenohKeys.for_vessel(vessel)
+        if config is None:
+            config = load_config(shipped_config_path(self._shipped))
+        else:
+            validate_config(config, f"{type(self).__name__} config")
+        self.publish_errors = 0
+        self._entities: list[Any] = []
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._failing: set[str] = set()  # ports whose last message failed: log transitions only
+        self._closed = False
+        self._close_lock = threading.Lock()
+        try:
+            self._session = zenoh.open(config)
+        except zenoh.ZError as e:
+            raise ZenohLinkError(f"{type(self).__name__}: cannot open zenoh session: {e}") from e
+        _OPEN_LINKS.add(self)
+
+    def _subscribe(self, key: str, decode: Callable[[bytes], T], sink: _Sink[T]) -> None:
+        def on_sample(sample: zenoh.Sample) -> None:
+            if sample.kind != zenoh.SampleKind.PUT:  # pyo3 enums: `is` is always False
+                return
+            try:
+                value = decode(sample.payload.to_bytes())
+            except MalformedMessage as e:
+                sink.count_malformed()
+                self._transition(key, failed=True, detail=f"dropped malformed sample: {e}")
+                return
+            sink.put(value)
+            if key in self._failing:
+                self._transition(key, failed=False, detail="valid samples again")
+
+        self._entities.append(self._session.declare_subscriber(key, on_sample))
+
+    def _declare_publisher(self, key: str, *, urgent: bool = False, reliable: bool = False) -> None:
+        """urgent: real-time priority, no batching, drop when congested (latest value wins)."""
+        if urgent:
+            priority, express = zenoh.Priority.REAL_TIME, True
+        else:
+            priority, express = zenoh.Priority.DATA, False
+        congestion = zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
+        publisher = self._session.declare_publisher(
+            key,
+            encoding=JSON_ENCODING,
+            priority=priority,
+            express=express,
+            congestion_control=congestion,
+        )
+        self._publishers[key] = publisher
+        self._entities.append(publisher)
+
+    def _publish(self, key: str, encode: Callable[[T], bytes], msg: T) -> bool:
+        try:
+            payload = encode(msg)
+        except (ValueError, TypeError) as e:  # MalformedMessage is a ValueError
+            self._fail(key, f"cannot encode: {e}")
+            return False
+        return self._put(key, payload)
+
+    def _put(self, key: str, payload: bytes) -> bool:
+        if self._closed:
+            return False
+        try:
+            self._publishers[key].put(payload)
+        except zenoh.ZError as e:
+            self._fail(key, f"publish failed: {e}")
+            return False
+        if key in self._failing:
+            self._transition(key, failed=False, detail="publishing again")
+        return True
+
+    def _fail(self, key: str, detail: str) -> None:
+        self.publish_errors += 1
+        self._transition(key, failed=True, detail=detail)
+
+    def _transition(self, key: str, *, failed: bool, detail: str) -> None:
+        if failed and key not in self._failing:
+            self._failing.add(key)
+            log.warning("%s: %s", key, detail)
+        elif not failed and key in self._failing:
+            self._failing.discard(key)
+            log.info("%s: %s", key, detail)
+        else:
+            log.debug("%s: %s", key, detail)
+
+    def subscribers_matched(self, key: str | None = None, timeout_s: float = 0.0) -> bool:
+        """True once the publisher on ``key`` (None: every publisher of this link) has a
+        matching remote subscriber; waits up to ``timeout_s``.
+
+        A sample published before the match can be lost, so a process that must not lose
+        its first message waits on this first.
+        """
+        publishers = list(self._publishers.values()) if key is None else [self._publishers[key]]
+        deadline = time.monotonic() + timeout_s
+        while True:
+            if not self._closed and all(map(_matched, publishers)):
+                return True
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.01)
+
+    @property
+    def closed(self) -> bool:
+        """``shutdown()`` has run."""
+        return self._closed
+
+    def shutdown(self) -> None:
+        """Undeclare everything and close the session; safe to call more than once."""
+        with self._close_lock:
+            if self._closed:
+                return
+            self._closed = True
+        _OPEN_LINKS.discard(self)
+        for entity in reversed(self._entities):
+            try:
+                entity.undeclare()
+            except zenoh.ZError as e:
+                log.debug("undeclare %s: %s", entity, e)
+        self._entities.clear()
+        try:
+            self._session.close()
+        except zenoh.ZError as e:
+            log.warning("closing zenoh session: %s", e)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.shutdown()

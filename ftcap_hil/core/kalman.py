@@ -1,0 +1,325 @@
+"""Fault estimation by a Kalman filter on the measured motion (mode ``ftcap``, the default).
+
+The windowed estimator differences two noisy velocity samples into a wrench and fits it as if
+it were exact: velocity noise sigma becomes wrench noise ~ M sigma sqrt(2) / T_s. This filter
+uses the evidence as it is. Its state carries the dynamic state of the plant and the fault
+parameters themselves::
+
+    z = [s (k), delta (m), b (k)]        s = nu (vessel) or x (linear plant), b = B f + tau_env
+
+    predict   s(t+1) = f(s(t), w, dt)    w = B diag(u) delta + b     (the allocator's model)
+              delta, b: random walks (q_delta, q_bias per second)
+    measure   y = s + v,  v ~ N(0, R),  R = diag(measurement_std^2)   (the sensor's noise)
+
+``f`` is the plant's one-step map, the same discretisation the plant's ``inversion`` names
+("euler": the paper's discrete model; "trapezoid": an explicit midpoint step, second-order
+accurate for the continuous-time vessel), linearised each step (EKF). Model error and
+unmodelled disturbances enter as process noise on s: ``model_error`` (a fraction of the
+largest achievable wrench per axis, S) times G, the input gain of the step. The filter gives
+every estimate a variance: P[delta_i, delta_i] is the square of the reported ``delta_std``.
+Where the data carry no information about a thruster (its command near zero, no
+excitation) its variance grows by q_delta per second and its estimate stays where it was.
+
+A fault onset is a change the random walk would take long to follow. A CUSUM on the
+normalised innovation (e^T S^-1 e, chi^2 with k degrees of freedom under no change) flags
+it at a configured level; the parameters' covariance is then widened (``reset_std``) so the
+filter re-converges in a few samples. The sample that raised the alarm usually straddles the
+onset (part healthy, part faulty): it updates s only, never the parameters.
+
+Decisions (flags, what the allocator uses) are taken from the estimate *and* its variance in
+:mod:`ftcap_hil.core.decisions`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ftcap_hil.core.estimator import Estimate, EstimatorConfig
+from ftcap_hil.core.messages import BoolArray, FloatArray
+from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.step_models import LinearStep, StepModel, VesselStep, inv_small, step_model
+
+# Re-exported: callers import the step models from here too.
+__all__ = [
+    "FilterOutput",
+    "KalmanEstimator",
+    "LinearStep",
+    "StepModel",
+    "VesselStep",
+    "inv_small",
+    "step_model",
+]
+
+
+@dataclass(frozen=True)
+class FilterOutput:
+    """What one filter update produced, besides the estimate itself."""
+
+    estimate: Estimate
+    delta_var: FloatArray  # (m,) variance of delta_hat
+    bias_cov: FloatArray  # (k, k) covariance of b_hat
+    nis: float  # normalised innovation squared of this sample (chi^2_k under no change)
+    alarm: bool  # the change detector fired on this sample
+    info: FloatArray  # (m,) Fisher information this sample carried about each delta_i
+
+
+class KalmanEstimator:
+    """See the module docstring. Call :meth:`update` once per estimation sample."""
+
+    def __init__(
+        self,
+        B: FloatArray,
+        scale: FloatArray,
+        plant: LinearPlant | SurfaceVessel,
+        config: EstimatorConfig | None = None,
+    ) -> None:
+        self.config = cfg = config or EstimatorConfig()
+        self._B = np.array(B, dtype=np.float64)
+        self._k, self._m = self._B.shape
+        self._scale = np.asarray(scale, dtype=np.float64)
+        self._model = step_model(plant)
+        if self._model.k != self._k:
+            raise ValueError(f"plant has {self._model.k} dynamic states, B has {self._k} rows")
+        self._pinv = np.linalg.pinv(self._B)
+        k, m = self._k, self._m
+        self._n = 2 * k + m
+        self._R = np.diag(np.square(self._measurement_std()))
+        self._theta0_var = np.concatenate(
+            [np.full(m, cfg.initial_delta_std**2), np.square(cfg.initial_bias_rel * self._scale)]
+        )
+        self._reset_var = np.concatenate(
+            [np.full(m, cfg.reset_std**2), np.square(cfg.reset_bias_rel * self._scale)]
+        )
+        self._F = np.eye(self._n)
+        self._model_std = cfg.model_error * self._scale
+        self._q_theta = np.concatenate(
+            [np.full(m, cfg.q_delta**2), np.square(cfg.q_bias_rel * self._scale)]
+        )
+        self._theta_diag = (np.arange(k, self._n), np.arange(k, self._n))
+        self._IKH = np.eye(self._n)
+        self._s_diag = (np.arange(k), np.arange(k))
+        self.z: FloatArray = np.concatenate([np.zeros(k), np.ones(m), np.zeros(k)])
+        self.P: FloatArray = np.diag(np.concatenate([np.ones(k), self._theta0_var]))
+        self._started = False
+        self._cusum = 0.0
+        self._since_alarm = 10**9
+        self.samples = 0  # samples used since the start
+        # Evidence since the change detector last rested at 0: (e, dE/ddelta, dE/db, S^-1)
+        self._evidence: deque[tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = deque(
+            maxlen=40
+        )
+        self.suspects: BoolArray = np.zeros(self._m, dtype=bool)  # widened at the last alarm
+        self.suspect_weight: FloatArray = np.zeros(self._m)  # their posterior odds, sum 1
+        self.q_scale = 1.0  # process-noise scale learnt from the innovations
+
+    def _measurement_std(self) -> FloatArray:
+        std = self.config.measurement_std
+        if std is None:
+            return np.full(self._k, 1e-6)
+        arr = np.asarray(std, dtype=np.float64)
+        if arr.shape != (self._k,):
+            raise ValueError(f"estimator.measurement_std: expected {self._k} values, got {std}")
+        return np.maximum(arr, 1e-9)
+
+    def reset(self, delta: FloatArray | None = None, bf: FloatArray | None = None) -> None:
+        """Back to the initial state (optionally with given parameters)."""
+        k, m = self._k, self._m
+        self.z = np.concatenate(
+            [np.zeros(k), np.ones(m) if delta is None else delta, np.zeros(k) if bf is None else bf]
+        )
+        self.P = np.diag(np.concatenate([np.ones(k), self._theta0_var]))
+        self._started = False
+        self._cusum = 0.0
+
+    def update(
+        self, u: FloatArray, x_now: FloatArray, dt_s: float, x_prev: FloatArray | None = None
+    ) -> FilterOutput:
+        """One sample: the mean command u (m,) over the last ``dt_s`` and the measured plant
+        state at its end (the plant's full state vector, e.g. [eta, nu]); ``x_prev``, the
+        state at its start, is used only by the first sample (it fixes s)."""
+        k, m = self._k, self._m
+        y = self._model.dynamic_state(x_now)
+        if not self._started:
+            self._started = True
+            self.P[:k, :k] = self._R
+            if x_prev is None:  # nothing to learn from one state
+                self.z[:k] = y
+                return self._output(0.0, False, np.zeros(m))
+            self.z[:k] = self._model.dynamic_state(x_prev)
+        z_post, P_post = self.z.copy(), self.P.copy()
+        s_pred, F = self._predict(u, dt_s)
+        e = y - s_pred
+        S_inv = inv_small(self.P[:k, :k] + self._R)
+        nis = float(e @ S_inv @ e)
+        h = F[:k, k : k + m].copy()  # how each delta_i moved this sample's prediction
+        info = np.einsum("ji,jl,li->i", h, S_inv, h)
+        self.samples += 1
+        self._last_evidence = (e, h, F[:k, k + m :].copy(), S_inv)
+        self._evidence.append(self._last_evidence)
+        alarm = self._change_detected(nis)
+        if not alarm:
+            if self._since_alarm > m + k:
+                self._adapt(nis, dt_s)
+            self._correct(self.P[:, :k] @ S_inv, e)
+            self._project()
+            return self._output(nis, False, info)
+        # A change: the parameters' old evidence is dropped (their covariance widened before
+        # this sample's prediction). The sample that shows the change usually straddles the
+        # onset: the reported estimate uses it (the immediate reaction), the filter goes on
+        # from the state that used it for s only, as the windowed estimator evicts it.
+        self.suspects = self._isolate()
+        self.z, self.P = z_post, self._widened(P_post, self.suspects)
+        s_pred, F = self._predict(u, dt_s)
+        K = self.P[:, :k] @ inv_small(self.P[:k, :k] + self._R)
+        fast = self.z + K @ e
+        K[k:] = 0.0
+        self._correct(K, e)
+        self._project()
+        out = self._output(nis, True, info)
+        d = np.clip(fast[k : k + m], 0.0, 1.0)
+        fast_est = replace(out.estimate, delta_hat=d, bf_hat=fast[k + m :].copy(),
+                           f_hat=self._pinv @ fast[k + m :])  # fmt: skip
+        return replace(out, estimate=fast_est)
+
+    def _correct(self, K: FloatArray, e: FloatArray) -> None:
+        """Measurement update with gain K (n, k); Joseph form, which stays symmetric
+        positive semi-definite when R << P_theta."""
+        k = self._k
+        self.z = self.z + K @ e
+        IKH = self._IKH
+        IKH[:, :k] = -K
+        IKH[self._s_diag] += 1.0
+        P = IKH @ self.P @ IKH.T + K @ self._R @ K.T
+        IKH[:, :k] = 0.0  # back to the identity (the diagonal of the first k columns too)
+        IKH[self._s_diag] = 1.0
+        self.P = 0.5 * (P + P.T)
+
+    def _project(self) -> None:
+        """Bring delta back into [0, 1] by the covariance-weighted projection (Simon's
+        estimate projection): the parameters correlated with a clipped delta_i move with it,
+        so the state stays consistent with the data. A plain clip here made the estimate
+        drift along the unobservable directions while commands saturated."""
+        k, m = self._k, self._m
+        d = self.z[k : k + m]
+        low, high = d < 0.0, d > 1.0
+        active = np.flatnonzero(low | high)
+        if active.size == 0:
+            return
+        rows = k + active
+        target = np.where(low[active], 0.0, 1.0)
+        PD = self.P[:, rows]  # P D^T
+        gap = self.z[rows] - target
+        self.z -= PD @ np.linalg.solve(self.P[np.ix_(rows, rows)], gap)
+        np.clip(self.z[k : k + m], 0.0, 1.0, out=self.z[k : k + m])  # rounding only
+
+    def _predict(self, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+        k, m = self._k, self._m
+        s, delta, b = self.z[:k], self.z[k : k + m], self.z[k + m :]
+        w = self._B @ (delta * u) + b
+        s1, A, G = self._model.predict(s, w, dt)
+        F = self._F  # identity outside the first k rows, which are rewritten each step
+        F[:k, :k] = A
+        F[:k, k : k + m] = G @ (self._B * u)
+        F[:k, k + m :] = G
+        P = F @ self.P @ F.T
+        Gq = G * self._model_std
+        P[:k, :k] += self.q_scale * (Gq @ Gq.T)
+        P[self._theta_diag] += self._q_theta * dt
+        self.P = P
+        self.z[:k] = s1
+        return s1, F
+
+    def _adapt(self, nis: float, dt_s: float) -> None:
+        """Scale the process noise so that the innovations have the size the filter expects
+        (mean nis = k): smaller in a world the model matches, larger in a seaway or with a
+        model error. A log-average, over the samples so far at first and then with the time
+        constant ``adapt_s``; each sample's ratio clipped to [0.1, 10], samples around a
+        change alarm left out."""
+        cfg = self.config
+        if cfg.adapt_s <= 0.0:
+            return
+        ratio = min(max(nis / self._k, 0.1), 10.0)
+        # 1/n at first (the scale settles within the first samples), then the time constant
+        step = math.log(ratio) * min(1.0, max(dt_s / cfg.adapt_s, 1.0 / max(self.samples, 1)))
+        self.q_scale = min(max(self.q_scale * math.exp(step), 1e-6), 1e6)
+
+    def _change_detected(self, nis: float) -> bool:
+        """CUSUM on nis - k: alarm above ``cusum_threshold`` (then restart), with a hold-off
+        of m + k samples after an alarm so one onset is one alarm."""
+        cfg, k = self.config, self._k
+        self._since_alarm += 1
+        self._cusum = max(0.0, self._cusum + nis - k - cfg.cusum_drift)
+        if self._cusum > cfg.cusum_threshold and self._since_alarm > self._m + k:
+            self._cusum = 0.0
+            self._since_alarm = 0
+            return True
+        if self._cusum == 0.0:
+            self._evidence.clear()
+            self._evidence.append(self._last_evidence)
+        return False
+
+    def excitation_for(self, info_rate: float, dt_s: float) -> FloatArray:
+        """Command amplitude (N, (m,)) that alone brings each delta_i ``info_rate`` units of
+        Fisher information per second at this sensor noise: (|G B_i| a_i)^2 / s^2 per
+        sample, s^2 the innovation variance of a converged filter (about 2 R)."""
+        x = np.concatenate([np.zeros(self._k)])
+        s0 = self.z[: self._k] if self._started else x
+        _s1, _A, G = self._model.predict(s0, np.zeros(self._k), dt_s)
+        gain = np.linalg.norm(G @ self._B, axis=0)  # |G B_i| per unit command
+        s2 = 2.0 * float(np.mean(np.diag(self._R)))
+        out: FloatArray = np.sqrt(info_rate * dt_s * s2) / np.maximum(gain, 1e-300)
+        return out
+
+    def _isolate(self) -> BoolArray:
+        """Which thrusters may have changed: a generalized likelihood ratio per single
+        thruster hypothesis over the evidence since the detector left 0 (mean innovation
+        along G B_i u_i), Lambda_i = (sum h^T S^-1 e)^2 / sum h^T S^-1 h. Suspects: every
+        thruster within ``isolation_margin`` of the best one (2.71: chi^2_1 at 90 %;
+        a missed suspect is caught by the next alarm, a needless one only dips for a while)."""
+        m = self._m
+        a, c = np.zeros(m), np.zeros(m)
+        for e, h, _g, s_inv in self._evidence:
+            hs = s_inv @ h  # (k, m)
+            a += e @ hs
+            c += np.einsum("ji,ji->i", h, hs)
+        lam = np.where(c > 0.0, a * a / np.maximum(c, 1e-300), 0.0)
+        suspects: BoolArray = lam >= lam.max() - self.config.isolation_margin
+        weight = np.where(suspects, np.exp(0.5 * (lam - lam.max())), 0.0)
+        self.suspect_weight = weight / weight.sum()
+        return suspects
+
+    def _widened(self, P: FloatArray, suspects: BoolArray) -> FloatArray:
+        """P with the suspects' delta and every bias raised to at least the reset level, and
+        their correlations dropped (their old evidence no longer holds). The other thrusters
+        keep what the filter knows of them: one failure does not make them unknown."""
+        k = self._k
+        wide = np.concatenate([suspects, np.ones(k, dtype=bool)])
+        idx = k + np.flatnonzero(wide)
+        # each suspect widened in proportion to its posterior odds of being the one
+        share = np.concatenate([self.suspect_weight, np.ones(k)])[wide]
+        var = np.maximum(np.diag(P)[idx], share * self._reset_var[wide])
+        out = P.copy()
+        out[idx, :] = 0.0
+        out[:, idx] = 0.0
+        out[idx, idx] = var
+        return out
+
+    def _output(self, nis: float, alarm: bool, info: FloatArray) -> FilterOutput:
+        k, m = self._k, self._m
+        delta = self.z[k : k + m].copy()
+        bf = self.z[k + m :].copy()
+        var = np.diag(self.P)[k : k + m].copy()
+        est = Estimate(
+            delta,
+            bf,
+            self._pinv @ bf,
+            innovation=math.sqrt(nis / k) if nis > 0 else 0.0,
+            window_len=self.samples,
+            restarted=alarm,
+            delta_std=np.sqrt(np.maximum(var, 0.0)),
+        )
+        return FilterOutput(est, var, self.P[k + m :, k + m :].copy(), nis, alarm, info)

@@ -326,6 +326,36 @@ def fly(opts: argparse.Namespace, gcs: Any, children: list[Child], summary: dict
     return flight
 
 
+def start_peers(
+    opts: argparse.Namespace, can: list[str], ports: tuple[int, int, int], children: list[Child]
+) -> tuple[Child, Child]:
+    """The sim and the allocator on the bus and on loopback MAVLink (gcs, vessel, allocator
+    UDP ports), appended to ``children`` as they start."""
+    out: Path = opts.out
+    gcs_port, vessel_port, alloc_port = ports
+    sim = Child(
+        "sim",
+        cli("sim", "--record", str(out / "record.csv"), *sets([
+            *can, "zenoh.enabled=false", *SIM_SETTINGS, *opts.sim_set,
+            f'mavlink.connection="udpin:127.0.0.1:{vessel_port}"',
+            f'mavlink.peers=["127.0.0.1:{alloc_port}", "127.0.0.1:{gcs_port}"]',
+        ])),
+        out / "sim.log",
+    )  # fmt: skip
+    children.append(sim)
+    alloc = Child(
+        "allocator",
+        cli("allocator", "--command-log", str(out / "commands.csv"), *sets([
+            *can, "zenoh.enabled=false", *ALLOCATOR_SETTINGS,
+            f'mavlink.connection="udpin:127.0.0.1:{alloc_port}"',
+            f'mavlink.peers=["127.0.0.1:{gcs_port}"]',
+        ])),
+        out / "allocator.log",
+    )  # fmt: skip
+    children.append(alloc)
+    return sim, alloc
+
+
 def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
     from bridges.mavlink.config import GCS_IDS, MavlinkEndpoint
     from bridges.mavlink.gcs import MavlinkGcsLink
@@ -347,26 +377,7 @@ def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
         capture.wait_listening(opts.start_timeout_s)
         summary["capture_started_wall"] = time.time()
         can = bus_settings(opts.bus, channel)
-        sim = Child(
-            "sim",
-            cli("sim", "--record", str(out / "record.csv"), *sets([
-                *can, "zenoh.enabled=false", *SIM_SETTINGS, *opts.sim_set,
-                f'mavlink.connection="udpin:127.0.0.1:{vessel_port}"',
-                f'mavlink.peers=["127.0.0.1:{alloc_port}", "127.0.0.1:{gcs_port}"]',
-            ])),
-            out / "sim.log",
-        )  # fmt: skip
-        children.append(sim)
-        alloc = Child(
-            "allocator",
-            cli("allocator", "--command-log", str(out / "commands.csv"), *sets([
-                *can, "zenoh.enabled=false", *ALLOCATOR_SETTINGS,
-                f'mavlink.connection="udpin:127.0.0.1:{alloc_port}"',
-                f'mavlink.peers=["127.0.0.1:{gcs_port}"]',
-            ])),
-            out / "allocator.log",
-        )  # fmt: skip
-        children.append(alloc)
+        sim, alloc = start_peers(opts, can, (gcs_port, vessel_port, alloc_port), children)
         endpoint = MavlinkEndpoint.inbox(gcs_port, GCS_IDS, (alloc_port, vessel_port))
         with MavlinkGcsLink(endpoint) as gcs:
             flight = fly(opts, gcs, children, summary)

@@ -38,7 +38,7 @@ from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.esc_watchdog import EscWatchdog
-from ftcap_hil.runtime.estimation import EstimationSampler
+from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
 from ftcap_hil.runtime.signals import capture_signals
@@ -75,7 +75,8 @@ class StatusSink(Protocol):
 
 @dataclass
 class Ports:
-    """The daemon's ports. Several setpoint or telemetry mailboxes: the freshest wins."""
+    """The daemon's ports. Several setpoint mailboxes: the latest received wins; several
+    telemetry mailboxes: the newest measurement wins."""
 
     setpoints: list[Mailbox[WrenchSetpoint]]
     telemetry: list[Mailbox[Odometry]]
@@ -216,7 +217,7 @@ class AllocatorDaemon:
         self.cycles += 1
         dt = self._dt_s(now)
         setpoint, sp_stamp = _latest(self.ports.setpoints)
-        odom, tel_stamp = _latest(self.ports.telemetry)
+        odom, tel_stamp = self._telemetry()
         fresh = self._freshness(now, sp_stamp, tel_stamp)
         sample = None if fresh.telemetry_stale else self.sampler.sample(odom, tel_stamp)
         result = None
@@ -241,6 +242,13 @@ class AllocatorDaemon:
             self._last_status_ns = now
             self._publish(now, fresh)
         return result
+
+    def _telemetry(self) -> tuple[Odometry | None, int]:
+        """The newest odometry over the telemetry ports (by vessel time, not by receipt:
+        :func:`~ftcap_hil.runtime.estimation.newest_odometry`) and its receipt stamp."""
+        window_ns = int(self.config.telemetry_timeout_s * 1e9)
+        slot = newest_odometry([box.latest() for box in self.ports.telemetry], window_ns)
+        return (None, -1) if slot is None else (slot.value, slot.stamp_ns)
 
     def _dt_s(self, now: int) -> float | None:
         """Seconds since the last cycle, clamped to ``dt_clamp`` periods (None: first)."""

@@ -214,6 +214,7 @@ class AllocatorDaemon:
     def cycle(self, now: int) -> CycleResult | None:
         """One cycle at ``now`` (monotonic ns); the core's result, None while the setpoint
         is stale (zero thrust)."""
+        started = self.loop.clock()
         self.cycles += 1
         dt = self._dt_s(now)
         setpoint, sp_stamp = _latest(self.ports.setpoints)
@@ -223,7 +224,7 @@ class AllocatorDaemon:
         result = None
         if fresh.setpoint_stale:
             self._tau_d = np.zeros(self.core.k)
-            self._send(np.zeros(self.core.m), now)
+            self._send(np.zeros(self.core.m), now, started)
             self.core.reset_command()
         else:
             self._tau_d = setpoint.tau
@@ -231,7 +232,7 @@ class AllocatorDaemon:
             result = self.core.step(
                 setpoint.tau, obs, u_sample=u_mean, dt_s=dt, forced_dead=fresh.esc_failed
             )
-            self._send(result.u, now)
+            self._send(result.u, now, started)
             if sp_stamp != self._last_sp_stamp:
                 self._last_sp_stamp = sp_stamp
                 self.latency.reaction(self.loop.clock() - sp_stamp)
@@ -282,13 +283,17 @@ class AllocatorDaemon:
         )
         return Freshness(sp_age, tel_age, sp_stale, tel_stale, esc_failed)
 
-    def _send(self, u: FloatArray, now: int) -> None:
+    def _send(self, u: FloatArray, now: int, started: int) -> None:
+        """``u`` to the thrusters; the sampler gets it stamped when it went out: ``now`` plus
+        the cycle's work so far (the loop's clock read at ``started`` and after the send)."""
         if not np.isfinite(u).all():  # cannot happen (the allocator clips), never on the bus
             log.error("non-finite command %s replaced by zero", u)
             u = np.zeros_like(u)
         if not self.ports.thrusters.send(u):
             self.not_sent += 1
-        self.sampler.command_sent(now, u)
+        # Not ``now``: estimation and the QP take a millisecond or more, and a command
+        # stamped before it went out makes the interval's mean lead the motion by as much.
+        self.sampler.command_sent(now + self.loop.clock() - started, u)
 
     def _announce(self, text: str, severity: Severity) -> None:
         _log_announce(text, severity)

@@ -11,6 +11,7 @@ import os
 import re
 import signal
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -411,6 +412,28 @@ def test_a_second_signal_forces_the_exit_and_the_zero_still_goes_out() -> None:
         d.run(max_cycles=1000)
     assert np.any(sink.commands[-2] != 0) and np.all(sink.commands[-1] == 0)
     assert d.cycles == 1 and signal.getsignal(signal.SIGTERM) is before
+
+
+class SlowSink(Sink):
+    """A bus write that takes 20 ms."""
+
+    def send(self, u: np.ndarray) -> bool:
+        time.sleep(0.02)
+        return super().send(u)
+
+
+def test_a_command_is_stamped_when_it_went_out_not_when_the_cycle_began() -> None:
+    sink = SlowSink()
+    ports = Ports([Mailbox("setpoint")], [Mailbox("odometry")], sink)
+    d = AllocatorDaemon(DaemonConfig(THS, B, SurfaceVessel(), CoreConfig(), rate_hz=10.0), ports)
+    d.cycle(1 * S)  # no setpoint: zero
+    ports.setpoints[0].put(WrenchSetpoint.checked(SURGE), 2 * S)
+    r = d.cycle(2 * S)
+    assert r is not None and np.any(r.u != 0)
+    mean = d.sampler.history.mean(int(1.5 * S), int(2.1 * S))
+    assert mean is not None
+    # out at >= 2.02 s: at most 80 ms of the 600 ms (100 ms if stamped at the cycle's start)
+    assert np.all(np.abs(mean) <= np.abs(r.u) * 0.08 / 0.6 + 1e-12), (mean, r.u)
 
 
 def test_a_late_copy_of_older_telemetry_does_not_replace_the_newest() -> None:

@@ -92,7 +92,7 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     if truth.bank.time_constant_s.any():  # the allocator is told the thrusters' lag
         core = dataclasses.replace(core, thruster_lag_s=tuple(truth.bank.time_constant_s.tolist()))
     if core.estimator.measurement_std is None and sensor is not None:
-        std = tuple(float(v) for v in sensor.noise_std[3:6])
+        std = tuple(float(v) for v in sensor.noise_std)  # pose and velocities: PoseStep
         core = dataclasses.replace(
             core, estimator=dataclasses.replace(core.estimator, measurement_std=std)
         )

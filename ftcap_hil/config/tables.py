@@ -226,8 +226,8 @@ class Table:
     def string(self, key: str, default: str | None | _Missing = MISSING) -> str | None:
         """A non-empty string; ``default`` if absent."""
         v = self.value(key, default)
-        if v is None and key not in self.data:
-            return None
+        if key not in self.data:
+            return v
         if not isinstance(v, str) or not v:
             raise self._bad(key, "a non-empty string", v)
         return v
@@ -305,7 +305,11 @@ class Table:
     # ----------------------------------------------------------------- nested tables
 
     def _child(self, key: str, data: Mapping[str, Any], index: int | None = None) -> Table:
-        child = Table(data, self.file, f"{self.name}.{key}" if self.name else key, index)
+        name = f"{self.name}.{key}" if self.name else key
+        for child in self._children:  # read twice: the same reader, the same read keys
+            if child.name == name and child.index == index and child.data is data:
+                return child
+        child = Table(data, self.file, name, index)
         self._children.append(child)
         return child
 
@@ -335,8 +339,9 @@ class Table:
     ) -> D:
         """``cls`` built from this table: one key per dataclass field (minus ``exclude``),
         each read by the getter its annotation calls for (float, int, bool, str, an Enum,
-        ``float | None``); ``choices`` restrict string fields; ``defaults`` replace the
-        dataclass's own defaults. A ValueError of ``cls`` becomes a ConfigError here."""
+        ``tuple[float, ...]``, any of them ``| None``); ``choices`` restrict string fields;
+        ``defaults`` replace the dataclass's own defaults. A ValueError of ``cls`` becomes a
+        ConfigError here."""
         hints = typing.get_type_hints(cls)
         skip = set(exclude)
         given: dict[str, Any] = dict(defaults or {})
@@ -358,6 +363,8 @@ class Table:
             return self.choice(key, choices)
         if isinstance(hint, type) and issubclass(hint, enum.Enum):
             return self.enum(key, hint)
+        if typing.get_origin(hint) is tuple and typing.get_args(hint) == (float, ...):
+            return tuple(float(x) for x in self.vector(key))
         getter: dict[Any, Callable[[str], Any]] = {
             float: self.number,
             int: self.integer,
@@ -399,42 +406,3 @@ class Table:
         if exc_type is None:
             self.finish()
 
-
-# ------------------------------------------------------- the loaders' former helpers
-# Kept until every loader reads through Table (then removed).
-
-
-def get(table: dict[str, Any], key: str, where: str, default: Any = ...) -> Any:
-    if key in table:
-        return table[key]
-    if default is ...:
-        raise ConfigError(f"{where}.{key}: missing")
-    return default
-
-
-def number(table: dict[str, Any], key: str, where: str, default: Any = ...) -> float:
-    v = get(table, key, where, default)
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise ConfigError(f"{where}.{key}: expected a finite number, got {v!r}")
-    return float(v)
-
-
-def vector(v: Any, where: str, length: int | None = None) -> FloatArray:
-    try:
-        arr = np.atleast_1d(np.asarray(v, dtype=np.float64))
-    except (TypeError, ValueError):
-        raise ConfigError(f"{where}: expected numbers, got {v!r}") from None
-    if arr.ndim != 1 or (length is not None and arr.size != length) or not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{where}: expected {length or 'some'} finite numbers, got {v!r}")
-    return arr
-
-
-def dataclass_from_table(cls: type, table: dict[str, Any], where: str, **extra: Any) -> Any:
-    known = {f.name for f in dataclasses.fields(cls)}
-    unknown = set(table) - known
-    if unknown:
-        raise ConfigError(f"{where}: unknown keys {sorted(unknown)} (known: {sorted(known)})")
-    try:
-        return cls(**{**table, **extra})
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"{where}: {e}") from e

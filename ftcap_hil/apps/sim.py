@@ -41,7 +41,9 @@ def run(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         try:
             cfg = load_config(args.config, args.set, args.scenario)
-            ports = VesselPorts.open(cfg.raw, cfg.sim.thrusters, cfg.shell.fault_injection_enabled)
+            ports = VesselPorts.open(
+                cfg.ports, cfg.sim.thrusters, cfg.shell.fault_injection_enabled
+            )
         except ConfigError as e:
             log.error("configuration error: %s", e)
             return 2

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 # name -> (module with add_arguments(parser) and run(args) -> exit code, help)
 _COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("ftcap_hil.apps.simulate", "Offline closed-loop simulation of a scenario"),
+    "campaign": ("ftcap_hil.apps.campaign", "Fault campaign: scenarios x seeds x modes on Dask"),
     "allocator": ("ftcap_hil.apps.allocator", "Run the allocator daemon"),
     "sim": (
         "ftcap_hil.apps.sim",

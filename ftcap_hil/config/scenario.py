@@ -7,13 +7,11 @@ names the file, the table and the key, and an unknown key or table is an error.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from ftcap_hil.config.fault_keys import fault_schedule_from
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
 from ftcap_hil.config.vessel import plant_from
@@ -22,7 +20,6 @@ from ftcap_hil.core.controllers import PoseController, StateFeedback
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.estimator import EstimatorConfig
 from ftcap_hil.core.excitation import ExcitationConfig
-from ftcap_hil.core.faults import FaultEvent, FaultSchedule
 from ftcap_hil.core.plants import LinearPlant
 from ftcap_hil.core.qp import available_backends
 from ftcap_hil.core.scenario import Scenario, Segment
@@ -31,34 +28,6 @@ from ftcap_hil.core.status import Mode
 SHIPPED = "ftcap_hil.data.scenarios"
 INTEGRATORS = ("euler", "rk4")
 REPLACEABLE = ("controller", "reference", "fault")  # tables a mission may give instead
-
-
-def fault_event_from(t: Table, m: int) -> FaultEvent:
-    """One ``[[fault]]``: from, optional until (s or steps; absent: forever), and delta /
-    bias for all m thrusters (vectors), or for ``thruster`` (1-based) alone (scalars)."""
-    start = t.number("from")
-    end = t.number("until", math.inf)
-    if end <= start:
-        raise t.error("until", f"expected a time after from = {start:g}, got {end:g}")
-    thruster = t.integer("thruster", None, lo=1, hi=m)
-    if thruster is None:
-        delta = t.vector("delta", m, lo=0.0, hi=1.0) if t.has("delta") else None
-        bias = t.vector("bias", m) if t.has("bias") else None
-        t.allow("delta", "bias")
-        return FaultEvent(start, end, None, delta, bias)
-    d, b = t.number("delta", None, lo=0.0, hi=1.0), t.number("bias", None)
-    return FaultEvent(
-        start,
-        end,
-        thruster - 1,
-        None if d is None else np.float64(d),  # type: ignore[arg-type]
-        None if b is None else np.float64(b),  # type: ignore[arg-type]
-    )
-
-
-def fault_schedule_from(tables: list[Table], m: int) -> FaultSchedule:
-    """The ``[[fault]]`` entries of a file, in order (later ones win)."""
-    return FaultSchedule(m, tuple(fault_event_from(t, m) for t in tables))
 
 
 def core_config_from(root: Table, mode: Mode, evict_straddling: bool = True) -> CoreConfig:

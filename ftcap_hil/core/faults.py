@@ -1,41 +1,141 @@
 """True thruster faults over time: what the vessel's thrusters actually do.
 
 A fault acts per thruster as ``F_i = delta_i u_i + f_i`` (eq. 23 of the paper): ``delta`` (m,)
-in [0, 1] is the effectiveness, ``f`` (m,) the bias force in N. A :class:`FaultSchedule` says
-which (delta, f) hold when (``Truth`` at a time); :func:`injection_plan` turns a schedule
-into the live fault injections (MAV_CMD_INJECT_FAILURE, Zenoh ``fault/inject``) that
-reproduce it on a healthy vessel. Pure: no I/O, no clock.
+in [0, 1] is the effectiveness, ``f`` (m,) the bias force in N; a thruster flagged ``stuck``
+holds the force it produced at the onset whatever its command (the thruster bank of
+``sim/thrusters.py`` does the holding: the schedule cannot know that force). A
+:class:`FaultSchedule` says what holds when (``Truth`` at a time); its events have a time
+profile (:class:`EventKind`): a step, a linear ramp, an intermittent on/off pattern, a stuck
+output, a bias step. :func:`injection_plan` turns a schedule into the live fault injections
+(MAV_CMD_INJECT_FAILURE, Zenoh ``fault/inject``) that reproduce it on a healthy vessel: exact
+for steps, biases and stuck outputs; a ramp becomes steps to its values at the schedule's
+change times (at least its end), and an intermittent
+fault's edges arrive with the injection path's latency. Ramps and intermittent faults are
+meant for the offline simulator and the sim process's own scenario schedule.
+:func:`random_faults` (``ftcap_hil.core.random_faults``) draws schedules for campaigns.
+Pure: no I/O, no clock.
 """
 
 from __future__ import annotations
 
+import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ftcap_hil.core.messages import FaultKind, FloatArray
+from ftcap_hil.core.messages import BoolArray, FaultKind, FloatArray
+
+
+def _no_flags() -> BoolArray:
+    return np.zeros(0, dtype=bool)
 
 
 @dataclass(frozen=True)
 class Truth:
-    """The faults actually acting (for the oracle and for metrics): ``delta`` (m,)
-    effectiveness in [0, 1], ``f`` (m,) bias force per thruster in N."""
+    """The faults actually acting (for the oracle, for metrics and for the thruster bank).
+
+    ``delta`` (m,) effectiveness in [0, 1], ``f`` (m,) bias force per thruster in N,
+    ``stuck`` (m,) bool: the thruster holds its onset output (all False when not given)."""
 
     delta: FloatArray
     f: FloatArray
+    stuck: BoolArray = field(default_factory=_no_flags)
+
+    def __post_init__(self) -> None:
+        if self.stuck.shape == (0,) and self.delta.shape != (0,):
+            object.__setattr__(self, "stuck", np.zeros(self.delta.shape, dtype=bool))
+
+    def effective(self, held: FloatArray) -> Truth:
+        """(delta, f) seen from the command: a stuck thruster is ``delta = 0``, ``f = held``
+        (the (m,) forces in N it holds, from the thruster bank); ``stuck`` is kept."""
+        return Truth(
+            np.where(self.stuck, 0.0, self.delta), np.where(self.stuck, held, self.f), self.stuck
+        )
+
+
+class EventKind(enum.Enum):
+    """Time profile of a :class:`FaultEvent` (what it does between ``start`` and ``end``)."""
+
+    STEP = "step"  # delta and/or bias take their values at start
+    RAMP = "ramp"  # they move linearly from the earlier value to theirs over ramp_s
+    INTERMITTENT = "intermittent"  # a step for on_s, nothing for off_s, repeating
+    STUCK = "stuck"  # the thruster's output is frozen at its value at start
+    BIAS = "bias"  # a step of the bias alone (delta untouched)
 
 
 @dataclass(frozen=True)
 class FaultEvent:
-    """From ``start`` (inclusive) until ``end`` (exclusive; inf = forever): either one thruster
-    (``thruster`` 0-based, scalar delta/bias) or all (vectors). Later events override."""
+    """From ``start`` (inclusive) until ``end`` (exclusive; inf = forever, s): either one
+    thruster (``thruster`` 0-based, scalar delta/bias) or all (``None``, (m,) vectors).
+    Later events override earlier ones where they act.
+
+    ``kind`` is the time profile (:class:`EventKind`): a RAMP reaches its delta/bias
+    ``ramp_s`` after ``start``, starting from the value the earlier events give (healthy
+    if none); an INTERMITTENT event acts for ``on_s``, then not for ``off_s``, and so on
+    until ``end``, which must be finite; STUCK takes no delta or bias; BIAS takes a bias
+    and no delta."""
 
     start: float
     end: float
     thruster: int | None
-    delta: FloatArray | None
-    bias: FloatArray | None
+    delta: FloatArray | float | None
+    bias: FloatArray | float | None
+    kind: EventKind = EventKind.STEP
+    ramp_s: float = 0.0
+    on_s: float = 0.0
+    off_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.start) and self.end > self.start):
+            raise ValueError(f"fault event: need finite start < end, got {self.start}, {self.end}")
+        need = {
+            EventKind.RAMP: ("ramp_s",),
+            EventKind.INTERMITTENT: ("on_s", "off_s"),
+        }.get(self.kind, ())
+        for name in need:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{self.kind.value} fault: {name} must be > 0, got {value}")
+        if self.kind is EventKind.INTERMITTENT and not math.isfinite(self.end):
+            raise ValueError("intermittent fault: needs a finite end")
+        if self.kind is EventKind.STUCK and (self.delta is not None or self.bias is not None):
+            raise ValueError("stuck fault: takes no delta or bias (the output is frozen)")
+        if self.kind is EventKind.BIAS and (self.bias is None or self.delta is not None):
+            raise ValueError("bias fault: needs a bias and no delta")
+
+    def weight(self, t: float) -> float:
+        """How far the event has taken its values at ``t``: 0 (not acting) .. 1 (fully)."""
+        if not self.start <= t < self.end:
+            return 0.0
+        if self.kind is EventKind.RAMP:
+            return min((t - self.start) / self.ramp_s, 1.0)
+        if self.kind is EventKind.INTERMITTENT:
+            period = self.on_s + self.off_s
+            k = math.floor((t - self.start) / period + 1e-9)
+            if t < self.start + k * period:  # the nudge above overshot: same edges as below
+                k -= 1
+            return 1.0 if t < self.start + k * period + self.on_s else 0.0
+        return 1.0
+
+    def edges(self) -> list[float]:
+        """The times at which this event changes what acts (a ramp: its start and its end)."""
+        out = [self.start]
+        if self.kind is EventKind.RAMP:
+            out.append(min(self.start + self.ramp_s, self.end))
+        elif self.kind is EventKind.INTERMITTENT:
+            period = self.on_s + self.off_s
+            k = 0
+            while (on := self.start + k * period) < self.end:
+                out += [on, on + self.on_s]
+                k += 1
+        out.append(self.end)
+        return [t for t in out if t <= self.end and math.isfinite(t)]
+
+
+def _blend(old: FloatArray, target: FloatArray | float, w: float) -> FloatArray:
+    """``old`` moved a fraction ``w`` towards ``target``; exactly ``target`` at w = 1."""
+    return np.asarray(target if w >= 1.0 else old + w * (np.asarray(target) - old))
 
 
 @dataclass(frozen=True)
@@ -46,30 +146,34 @@ class FaultSchedule:
     events: tuple[FaultEvent, ...] = ()
 
     def at(self, t: float) -> Truth:
-        """The faults acting at time ``t`` (s, or steps for a discrete plant)."""
+        """The (delta, f, stuck) acting at time ``t`` (s, or steps for a discrete plant),
+        each (m,)."""
         delta, f = np.ones(self.m), np.zeros(self.m)
+        stuck = np.zeros(self.m, dtype=bool)
         for ev in self.events:
-            if not ev.start <= t < ev.end:
+            w = ev.weight(t)
+            if w <= 0.0:
                 continue
             sel = slice(None) if ev.thruster is None else ev.thruster
+            if ev.kind is EventKind.STUCK:
+                stuck[sel] = True
             if ev.delta is not None:
-                delta[sel] = ev.delta
+                delta[sel] = _blend(delta[sel], ev.delta, w)
             if ev.bias is not None:
-                f[sel] = ev.bias
-        return Truth(delta, f)
+                f[sel] = _blend(f[sel], ev.bias, w)
+        return Truth(delta, f, stuck)
 
     def change_times(self) -> list[float]:
-        """Every time at which some fault starts or ends, sorted (finite ends only)."""
-        times = {ev.start for ev in self.events} | {
-            ev.end for ev in self.events if math.isfinite(ev.end)
-        }
-        return sorted(times)
+        """Sorted times at which the truth changes or, for a ramp, starts or stops changing
+        (finite ones only); between two of them a ramp moves linearly, all else is constant."""
+        return sorted({t for ev in self.events for t in ev.edges()})
 
 
 @dataclass(frozen=True)
 class Injection:
     """One MAV_CMD_INJECT_FAILURE: at mission time ``at_s``, ``kind`` on ``thruster``
-    (0-based) with ``value`` (delta for WEAK, N for BIAS / STUCK, NaN otherwise)."""
+    (0-based) with ``value`` (delta for WEAK, N for BIAS / STUCK, NaN otherwise; a STUCK
+    with NaN holds the force the thruster produces at that moment)."""
 
     at_s: float
     thruster: int
@@ -97,9 +201,24 @@ def _injections_for(
     return out
 
 
+def _thruster_plan(i: int, t: float, prev: Truth, now: Truth) -> list[Injection]:
+    """Injections for thruster i at ``t`` going from ``prev`` to ``now``. A stuck onset is
+    a STUCK at the produced force (NaN); its end is OK, then whatever else acts."""
+    if now.stuck[i]:
+        return [] if prev.stuck[i] else [Injection(t, i, FaultKind.STUCK)]
+    after = (float(now.delta[i]), float(now.f[i]))
+    if prev.stuck[i]:
+        rest = _injections_for(i, t, (1.0, 0.0), after) if after != (1.0, 0.0) else []
+        return [Injection(t, i, FaultKind.OK), *rest]
+    before = (float(prev.delta[i]), float(prev.f[i]))
+    return _injections_for(i, t, before, after) if before != after else []
+
+
 def injection_plan(schedule: FaultSchedule, duration_s: float) -> list[Injection]:
     """The injections that reproduce ``schedule`` on a healthy vessel, in time order;
-    changes at or after ``duration_s`` are left out."""
+    changes at or after ``duration_s`` are left out. The schedule is sampled at its change
+    times only, so a ramp arrives as steps: to its value at any other change inside it, and
+    to its target at its end."""
     m = schedule.m
     prev = Truth(np.ones(m), np.zeros(m))
     plan: list[Injection] = []
@@ -108,9 +227,6 @@ def injection_plan(schedule: FaultSchedule, duration_s: float) -> list[Injection
             break
         now = schedule.at(t)
         for i in range(m):
-            before = (float(prev.delta[i]), float(prev.f[i]))
-            after = (float(now.delta[i]), float(now.f[i]))
-            if before != after:
-                plan += _injections_for(i, t, before, after)
+            plan += _thruster_plan(i, t, prev, now)
         prev = now
     return plan

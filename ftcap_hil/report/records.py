@@ -50,13 +50,22 @@ def column_names(sc: Scenario) -> list[str]:
     return names
 
 
+def flag_names(sc: Scenario) -> list[str]:
+    """Per-thruster decision columns the offline recorder appends after ``column_names``:
+    ``faulty_i`` (the core's fault flag, CoreConfig.fault_threshold / fault_clear) and
+    ``dead_i`` (taken out of the allocation: the effectiveness the allocator used was below
+    allocator.dead_threshold, ``Allocation.dead``); 0 or 1."""
+    m = sc.thrusters.m
+    return [f"faulty_{i}" for i in range(1, m + 1)] + [f"dead_{i}" for i in range(1, m + 1)]
+
+
 class Recorder:
-    """Collects one row per cycle, in the order of ``column_names``."""
+    """Collects one row per cycle, in the order of ``column_names`` then ``flag_names``."""
 
     def __init__(self, sc: Scenario, mode: str) -> None:
         self.sc = sc
         self.mode = mode
-        self.names = column_names(sc)
+        self.names = column_names(sc) + flag_names(sc)
         self.rows: list[FloatArray] = []
 
     def add(
@@ -93,6 +102,8 @@ class Recorder:
                     bool(np.any(res.probing)),
                     solve_s * 1e6,
                 ],
+                res.faulty,
+                res.allocation.dead,
             ]
         )
         self.rows.append(row)

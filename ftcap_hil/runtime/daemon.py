@@ -430,7 +430,7 @@ class AllocatorDaemon:
         for sink in self.ports.status:
             sink.announce(text, severity)
 
-    def _esc_fields(self, now: int) -> dict[str, tuple[float, ...]]:
+    def _esc_fields(self, now: int) -> dict[str, Any]:
         if self.ports.esc_latest is None or self.ports.esc_ages is None:
             return {}
         latest = self.ports.esc_latest()

@@ -15,6 +15,7 @@ from ftcap_hil.core.controllers import limit_wrench
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import Injection, injection_plan
 from ftcap_hil.core.messages import FaultKind
+from ftcap_hil.core.status import AllocatorStatus
 from ftcap_hil.report.flight import FlightRecorder
 from ftcap_hil.report.records import column_names
 
@@ -107,10 +108,9 @@ def test_limit_wrench_keeps_the_direction() -> None:
     assert limit_wrench(small, (3.0, 3.0, 0.6)) is small
 
 
-class _Status:
-    delta_hat = np.array([0.9, 1.0, 1.0, 1.0])
-    f_hat = np.array([0.01, 0.0, 0.0, 0.0])
-    flags = 1  # DEGRADED
+_STATUS = AllocatorStatus(
+    delta_hat=(0.9, 1.0, 1.0, 1.0), f_hat=(0.01, 0.0, 0.0, 0.0), degraded=True
+)
 
 
 def test_flight_record_has_the_simulator_columns_and_truth() -> None:
@@ -120,7 +120,7 @@ def test_flight_record_has_the_simulator_columns_and_truth() -> None:
     x0 = np.array([0.0, 0.0, 3.1, 0.0, 0.0, 0.0])
     x1 = np.array([0.1, 0.0, -3.1, 0.0, 0.0, 0.0])  # heading crossed +-pi
     rec.add(0.0, x0, np.zeros(3), np.zeros(3), None, None)
-    rec.add(13.0, x1, np.array([2.0, 0, 0]), np.array([0.5, 0, 0]), _Status(), u)
+    rec.add(13.0, x1, np.array([2.0, 0, 0]), np.array([0.5, 0, 0]), _STATUS, u)
     run = rec.finish("ftcap", mission.period_s, source="test")
     assert list(run.columns) == column_names(mission.scenario)
     c = {k: v[1] for k, v in run.columns.items()}

@@ -1,0 +1,258 @@
+"""Campaign files: strict keys, the plan they give, the fault generator, replay documents."""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ftcap_hil.config.campaign import (
+    FaultSpec,
+    load_campaign,
+    parse_campaign,
+    shipped_campaigns,
+)
+from ftcap_hil.config.campaign_faults import random_faults
+from ftcap_hil.config.campaign_plan import deep_merge, dumps_toml, plan_campaign
+from ftcap_hil.config.scenario import load_scenario, parse_scenario, shipped_scenarios
+from ftcap_hil.config.toml import read_toml
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.status import Mode
+
+SMALL = """
+[campaign]
+name = "small"
+seeds = [3, 4]
+modes = ["ftcap", "ftcap-prefilter"]
+duration = 40.0
+
+[[scenario]]
+source = "paper-4.2-ex1"
+label = "paper"
+faults = "random"
+[scenario.set.noise]
+state_std = [0.0, 0.0, 0.0, 1e-4, 1e-4, 1e-4]
+
+[variant.ftcap-prefilter]
+mode = "ftcap"
+estimator = { prefilter = 0.3 }
+
+[faults]
+kinds = ["dead", "bias"]
+onset = [10.0, 20.0]
+
+[healthy]
+seed_count = 1
+duration = 30.0
+"""
+
+
+def _parse(text: str):  # noqa: ANN202
+    return parse_campaign(tomllib.loads(text), "small.toml")
+
+
+def test_the_shipped_campaigns_parse_and_plan(tmp_path: Path) -> None:
+    assert {"smoke", "realistic"} <= set(shipped_campaigns())
+    for name in ("smoke", "realistic"):
+        plan, files = plan_campaign(load_campaign(name), tmp_path)
+        assert plan.tasks and files
+    plan, _ = plan_campaign(load_campaign("realistic"), tmp_path)
+    faulty = [t for t in plan.tasks if not t.healthy]
+    assert len(faulty) == 250  # 2 vessels x 5 kinds x 5 seeds x (none, cap, oracle, 2 ftcap)
+
+
+def _typo(table: str, key: str):  # noqa: ANN202
+    """A mutation of the SMALL document: ``key`` added to ``table`` (a dotted path)."""
+
+    def change(data: dict) -> None:
+        target = data
+        for part in table.split(".") if table else []:
+            target = target[int(part)] if part.isdigit() else target.setdefault(part, {})
+        target[key] = 1
+
+    return change
+
+
+@pytest.mark.parametrize(
+    ("table", "key", "where", "hint"),
+    [
+        ("campaign", "seed", "small.toml.campaign", "'seeds'"),
+        ("scenario.0", "sorce", "small.toml.scenario[0]", "'source'"),
+        ("faults", "onsett", "small.toml.faults", "'onset'"),
+        ("metrics", "convergence_tol_x", "small.toml.metrics", "'convergence_tol'"),
+        (
+            "variant.ftcap-prefilter",
+            "estimater",
+            "small.toml.variant.ftcap-prefilter",
+            "'estimator'",
+        ),
+        ("healthy", "duraton", "small.toml.healthy", "'duration'"),
+        ("", "extra", "small.toml", "known"),
+    ],
+)
+def test_an_unknown_key_names_the_file_the_table_and_the_nearest_key(
+    table: str, key: str, where: str, hint: str
+) -> None:
+    data = tomllib.loads(SMALL)
+    _typo(table, key)(data)
+    with pytest.raises(ConfigError) as err:
+        parse_campaign(data, "small.toml")
+    msg = str(err.value)
+    assert msg.startswith(where + ":") and f"unknown key {key!r}" in msg and hint in msg, msg
+
+
+@pytest.mark.parametrize(
+    ("change", "needle"),
+    [
+        ({"campaign": {"modes": ["ftcap", "nope"]}}, "'nope' is no mode"),
+        ({"campaign": {"seed_count": 2}}, "one of them"),
+        ({"faults": {"kinds": ["ramp"]}}, "faults.kinds"),
+        ({"faults": {"onset": [5.0, 1.0]}}, "faults.onset"),
+        ({"faults": {"partial_delta": [0.5, 1.0]}}, "below 1"),
+        ({"metrics": {"harm_ratio": 0.9}}, "harm_ratio"),
+        ({"variant": {"ftcap-prefilter": {"mode": "none"}}}, "mode"),
+        ({"variant": {"cap": {"mode": "ftcap"}}}, "mode's name"),
+    ],
+)
+def test_bad_values_are_config_errors(change: dict, needle: str) -> None:
+    with pytest.raises(ConfigError, match=needle):
+        parse_campaign(deep_merge(tomllib.loads(SMALL), change), "small.toml")
+
+
+def test_a_bad_scenario_override_fails_when_planning(tmp_path: Path) -> None:
+    data = deep_merge(
+        tomllib.loads(SMALL), {"variant": {"ftcap-prefilter": {"estimator": {"prefiltr": 0.3}}}}
+    )
+    with pytest.raises(ConfigError, match="prefiltr"):
+        plan_campaign(parse_campaign(data, "small.toml"), tmp_path)
+
+
+def test_the_plan_has_one_reference_per_case_and_shares_it(tmp_path: Path) -> None:
+    plan, files = plan_campaign(_parse(SMALL), tmp_path)
+    cases = {t.case for t in plan.tasks}
+    faulty = {c for c in cases if "healthy" not in c}
+    assert faulty == {f"paper/s{s}/{k}" for s in (3, 4) for k in ("dead", "bias")}
+    assert cases - faulty == {"paper/healthy/s0"}
+    for case in cases:
+        variants = sorted(t.variant for t in plan.tasks if t.case == case)
+        expect = ["cap", "ftcap", "ftcap-prefilter", "none", "oracle"]
+        assert variants == (["ftcap", "ftcap-prefilter", "none"] if "healthy" in case else expect)
+    keys = [t.key for t in plan.tasks]
+    assert len(set(keys)) == len(keys) and len({t.digest for t in plan.tasks}) == len(keys)
+    pre = next(t for t in plan.tasks if t.variant == "ftcap-prefilter")
+    assert pre.mode is Mode.FTCAP and pre.scenario.core.estimator.prefilter == 0.3
+    plain = next(t for t in plan.tasks if t.variant == "ftcap" and t.case == pre.case)
+    assert plain.scenario.core.estimator.prefilter == 0.0
+    assert all(t.scenario.seed == t.seed for t in plan.tasks)
+    assert list(pre.scenario.noise_std[3:]) == [1e-4] * 3
+    assert {t.scenario.duration_s for t in plan.tasks} == {40.0, 30.0}
+    assert all(not t.scenario.faults.events for t in plan.tasks if t.healthy)
+    # the replay files: one per case, and one more per case for the variant
+    assert len(files) == len(cases) * 2
+
+
+def test_replay_files_are_the_runs_scenarios(tmp_path: Path) -> None:
+    plan, files = plan_campaign(_parse(SMALL), tmp_path)
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    for task in plan.tasks:
+        path = Path(task.replay.split()[2])
+        assert f"--mode {task.mode.value}" in task.replay
+        sc = load_scenario(tmp_path / path.name).with_mode(task.mode)
+        assert _same_faults(sc, task.scenario)
+        assert sc.core == task.scenario.core and sc.seed == task.seed
+        assert sc.duration_s == task.scenario.duration_s
+
+
+def _same_faults(a, b) -> bool:  # noqa: ANN001
+    times = sorted(set(a.faults.change_times()) | set(b.faults.change_times()))
+    return all(
+        np.array_equal(a.faults.at(t).delta, b.faults.at(t).delta)
+        and np.array_equal(a.faults.at(t).f, b.faults.at(t).f)
+        for t in times
+    )
+
+
+@pytest.mark.parametrize("name", shipped_scenarios())
+def test_dumps_toml_round_trips_every_shipped_scenario(name: str) -> None:
+    data = read_toml(name, "ftcap_hil.data.scenarios").data
+    doc = copy.deepcopy(data)
+    doc["fault"] = [*data.get("fault", []), {"thruster": 1, "from": 0.1 + 0.2, "until": math.inf}]
+    doc["scenario"]["note"] = 'quote " and unicode \u03b4'
+    back = tomllib.loads(dumps_toml(doc))
+    assert back == doc
+
+
+def test_dumps_toml_nested_tables_and_arrays_of_tables() -> None:
+    doc = {"a": {"b": {"c": 1}, "x": [{"k": 1.5e-300}, {"k": -2}]}, "top": True, "l": [[1, 2]]}
+    assert tomllib.loads(dumps_toml(doc)) == doc
+
+
+def test_the_generator_is_reproducible_and_follows_its_ranges() -> None:
+    u_range = np.full(4, 0.1)
+    spec = FaultSpec(count=2, onset=(10.0, 20.0), bias=(0.1, 0.3), stuck=(0.2, 0.6))
+    draws = [random_faults(np.random.default_rng(7), u_range, 100.0, spec) for _ in range(2)]
+    assert draws[0] == draws[1]
+    other = random_faults(np.random.default_rng(8), u_range, 100.0, spec)
+    assert other != draws[0]
+    for seed in range(40):
+        for kind in ("dead", "stuck", "partial", "bias", "intermittent"):
+            gen = random_faults(np.random.default_rng(seed), u_range, 100.0, spec, kind)
+            assert len({g.thruster for g in gen}) == 2
+            for g in gen:
+                _check(g.kind, g.tables, spec)
+
+
+def _check(kind: str, tables: tuple, spec: FaultSpec) -> None:
+    first = tables[0]
+    assert 10.0 <= first["from"] <= 20.0
+    if kind == "intermittent":
+        assert len(tables) >= 2 and all(t["delta"] == 0.0 for t in tables)
+        for a, b in zip(tables[:-1], tables[1:], strict=True):
+            off = b["from"] - a["until"]
+            assert spec.intermittent_off[0] <= off <= spec.intermittent_off[1]
+        assert tables[-1]["until"] <= 100.0
+        return
+    assert len(tables) == 1 and "until" not in first  # permanent without a duration range
+    if kind == "partial":
+        assert 0.3 <= first["delta"] <= 0.7 and first["bias"] == 0.0
+    elif kind == "bias":
+        assert first["delta"] == 1.0 and 0.01 <= abs(first["bias"]) <= 0.03
+    elif kind == "stuck":
+        assert first["delta"] == 0.0 and 0.02 <= abs(first["bias"]) <= 0.06
+    else:
+        assert (first["delta"], first["bias"]) == (0.0, 0.0)
+
+
+def test_generated_tables_are_valid_scenario_faults() -> None:
+    data = read_toml("paper-4.2-ex1", "ftcap_hil.data.scenarios").data
+    spec = FaultSpec(count=4, duration=(5.0, 10.0))
+    gen = random_faults(np.random.default_rng(1), np.full(4, 0.1), 700.0, spec)
+    data["fault"] = [t for g in gen for t in g.tables]
+    sc = parse_scenario(data, "generated")
+    assert len(sc.faults.events) == len(data["fault"])
+    for ev, t in zip(sc.faults.events, data["fault"], strict=True):
+        assert ev.thruster == t["thruster"] - 1 and ev.end == t["until"] < math.inf
+
+
+def test_too_many_faults_for_the_vessel_is_a_config_error(tmp_path: Path) -> None:
+    data = deep_merge(tomllib.loads(SMALL), {"faults": {"count": 5}})
+    with pytest.raises(ConfigError, match="count = 5"):
+        plan_campaign(parse_campaign(data, "small.toml"), tmp_path)
+
+
+def test_scenario_faults_keep_the_files_schedule_and_none_removes_it(tmp_path: Path) -> None:
+    text = SMALL.replace('faults = "random"', 'faults = "scenario"\nduration = 300.0')
+    text += '\n[[scenario]]\nsource = "paper-4.2-ex1"\nlabel = "calm"\nfaults = "none"\n'
+    plan, _ = plan_campaign(_parse(text), tmp_path)
+    paper = next(t for t in plan.tasks if t.case == "paper/s3" and t.variant == "ftcap")
+    # eqs. (27)-(28): thruster 1 at 0.9 with a bias, then 0.8; thruster 3 stuck at 0.01
+    assert dict(paper.fault_kinds) == {0: "mixed", 2: "stuck"} and paper.kind == "multi"
+    assert _same_faults(paper.scenario, load_scenario("paper-4.2-ex1"))
+    calm = [t for t in plan.tasks if t.label == "calm"]
+    assert calm and all(t.healthy and not t.scenario.faults.events for t in calm)
+    assert {t.variant for t in calm} == {"none", "ftcap", "ftcap-prefilter"}

@@ -1,0 +1,323 @@
+"""Campaign metrics against hand-computed values on synthetic run records.
+
+Each record is built column by column (the offline simulator's columns plus faulty_i and
+dead_i) on the paper's vessel with T_s = 0.1 s, so every delay below is a whole number of
+cycles and can be written down by hand.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.core.faults import FaultEvent, FaultSchedule
+from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.status import Mode
+from ftcap_hil.report.campaign_metrics import (
+    MetricParams,
+    Reference,
+    classify,
+    episodes,
+    first_held,
+    reference_of,
+    run_metrics,
+)
+from ftcap_hil.report.campaign_summary import derive, fault_groups, fault_rows, run_groups
+from ftcap_hil.report.records import RunRecord, column_names, flag_names
+from ftcap_hil.runtime.offline import run_mode
+
+DT = 0.1
+PARAMS = MetricParams()
+
+
+def _scenario(duration_s: float, dt_s: float = DT) -> Scenario:
+    sc = load_scenario("paper-4.2-ex1")
+    return dataclasses.replace(sc, dt_s=dt_s, duration_s=duration_s)
+
+
+class Synthetic:
+    """A record of n cycles: healthy truth, perfect estimates, nothing flagged, at rest."""
+
+    def __init__(self, duration_s: float, dt_s: float = DT) -> None:
+        self.sc = _scenario(duration_s, dt_s)
+        self.n = self.sc.steps
+        self.t = np.arange(self.n) * dt_s
+        self.c: dict[str, Any] = {k: np.zeros(self.n) for k in column_names(self.sc)}
+        self.c.update({k: np.zeros(self.n) for k in flag_names(self.sc)})
+        self.c["t"] = self.t.copy()
+        for i in range(1, 5):
+            self.c[f"delta_{i}"][:] = 1.0
+            self.c[f"delta_hat_{i}"][:] = 1.0
+
+    def at(self, t0: float, t1: float = math.inf) -> np.ndarray:
+        """Cycle mask t0 <= t < t1 (a tiny margin against float rounding of k * dt)."""
+        return (self.t >= t0 - 1e-9) & (self.t < t1 - 1e-9)
+
+    def set(self, name: str, t0: float, t1: float, value: float) -> None:
+        self.c[name][self.at(t0, t1)] = value
+
+    def record(self) -> RunRecord:
+        return RunRecord(self.sc, "ftcap", self.c)
+
+
+def _dead_thruster_2(rec: Synthetic) -> None:
+    """Thruster 2 dead from 10 s on; the estimate follows at once."""
+    rec.set("delta_2", 10.0, math.inf, 0.0)
+    rec.set("delta_hat_2", 10.0, math.inf, 0.0)
+
+
+def test_a_flag_that_rises_1_5_s_after_the_onset_is_a_detection_delay_of_1_5_s() -> None:
+    rec = Synthetic(60.0)
+    _dead_thruster_2(rec)
+    rec.set("faulty_2", 11.5, math.inf, 1.0)
+    rec.set("dead_2", 12.0, math.inf, 1.0)
+    (fault,) = run_metrics(rec.record(), None, PARAMS)["faults"]
+    assert fault["thruster"] == 2 and fault["kind"] == "dead" and fault["detectable"]
+    assert fault["onset_s"] == pytest.approx(10.0)
+    assert fault["detection_delay_s"] == pytest.approx(1.5)
+    assert fault["removal_delay_s"] == pytest.approx(2.0)
+    assert fault["isolation_delay_s"] == pytest.approx(1.5)
+    assert fault["correct_isolation"] is True
+    assert fault["ended"] is False and fault["recovery_s"] is None
+
+
+def test_isolation_waits_until_no_healthy_thruster_is_flagged() -> None:
+    rec = Synthetic(60.0)
+    _dead_thruster_2(rec)
+    rec.set("faulty_2", 11.5, math.inf, 1.0)
+    rec.set("faulty_4", 11.0, 13.0, 1.0)  # a healthy one flagged by mistake meanwhile
+    out = run_metrics(rec.record(), None, PARAMS)
+    (fault,) = out["faults"]
+    assert fault["detection_delay_s"] == pytest.approx(1.5)
+    assert fault["isolation_delay_s"] == pytest.approx(3.0)
+    assert out["false_alarms"] == 1
+    assert out["healthy_flagged_s"] == pytest.approx(2.0)
+
+
+def test_a_fault_never_isolated_at_the_end_is_not_a_correct_isolation() -> None:
+    rec = Synthetic(60.0)
+    _dead_thruster_2(rec)
+    rec.set("faulty_2", 11.0, math.inf, 1.0)
+    rec.set("faulty_1", 40.0, math.inf, 1.0)  # the last quarter (47.5-60 s) has a healthy flag
+    (fault,) = run_metrics(rec.record(), None, PARAMS)["faults"]
+    assert fault["isolation_delay_s"] == pytest.approx(1.0)
+    assert fault["correct_isolation"] is False
+
+
+def test_a_healthy_thruster_flagged_for_10_s_in_1_h_is_1_false_alarm_per_h() -> None:
+    rec = Synthetic(3600.0, dt_s=1.0)
+    rec.set("faulty_3", 1000.0, 1010.0, 1.0)
+    rec.set("dead_3", 1002.0, 1007.0, 1.0)
+    rec.set("delta_hat_3", 1000.0, 1010.0, 0.05)
+    out = run_metrics(rec.record(), None, PARAMS)
+    assert out["faults"] == []
+    assert out["healthy_hours"] == pytest.approx(1.0)
+    assert out["false_alarms"] == 1 and out["false_removals"] == 1
+    assert out["false_alarm_rate_per_h"] == pytest.approx(1.0)
+    assert out["healthy_flagged_s"] == pytest.approx(10.0)
+    assert out["healthy_removed_s"] == pytest.approx(5.0)
+    assert out["healthy_flagged_frac"] == pytest.approx(10.0 / (4 * 3600.0))
+    assert out["healthy_delta_hat_min"] == pytest.approx(0.05)
+
+
+def test_time_to_estimate_and_errors_after_convergence() -> None:
+    rec = Synthetic(60.0)
+    rec.set("delta_1", 10.0, math.inf, 0.5)
+    # the estimate: 1 until 12 s, 0.58 (error 0.08) from 12 to 12.5 s, 0.75 from 12.5 to 14
+    # s (error 0.25), then 0.52 (error 0.02) for good: within 0.1 for 2 s only from 14 s
+    rec.set("delta_hat_1", 12.0, 12.5, 0.58)
+    rec.set("delta_hat_1", 12.5, 14.0, 0.75)
+    rec.set("delta_hat_1", 14.0, math.inf, 0.52)
+    rec.set("faulty_1", 12.0, math.inf, 1.0)
+    rec.set("f_hat_1", 0.0, math.inf, 0.004)
+    (fault,) = run_metrics(rec.record(), None, PARAMS)["faults"]
+    assert fault["kind"] == "partial"
+    assert fault["converge_s"] == pytest.approx(4.0)
+    assert fault["delta_error"] == pytest.approx(0.02)
+    assert fault["bias_error"] == pytest.approx(0.004)
+
+
+def test_recovery_after_an_intermittent_fault_ends() -> None:
+    rec = Synthetic(60.0)
+    rec.set("delta_2", 10.0, 20.0, 0.0)
+    rec.set("delta_hat_2", 10.0, 23.0, 0.0)
+    rec.set("dead_2", 10.5, 23.0, 1.0)
+    rec.set("faulty_2", 11.0, 25.0, 1.0)
+    out = run_metrics(rec.record(), None, PARAMS, kinds={1: "intermittent"})
+    (fault,) = out["faults"]
+    assert fault["kind"] == "intermittent" and fault["ended"] is True
+    assert fault["end_s"] == pytest.approx(20.0)
+    assert fault["recovery_s"] == pytest.approx(3.0)
+    assert fault["recovery_unflag_s"] == pytest.approx(5.0)
+    # until 25 s thruster 2 is recovering: neither faulty nor healthy time
+    assert out["healthy_hours"] == pytest.approx((4 * 60.0 - 10.0 - 5.0) / 4 / 3600)
+    assert out["healthy_flagged_s"] == 0.0 and out["false_alarms"] == 0
+    rec.set("faulty_2", 40.0, 41.0, 1.0)  # once recovered, a flag is a false alarm again
+    out = run_metrics(rec.record(), None, PARAMS, kinds={1: "intermittent"})
+    assert out["false_alarms"] == 1 and out["healthy_flagged_s"] == pytest.approx(1.0)
+
+
+def test_a_thruster_that_never_recovers_is_never_healthy_again() -> None:
+    rec = Synthetic(60.0)
+    rec.set("delta_2", 10.0, 20.0, 0.0)
+    rec.set("dead_2", 10.5, math.inf, 1.0)
+    rec.set("faulty_1", 30.0, 31.0, 1.0)  # another thruster's false alarm still counts
+    out = run_metrics(rec.record(), None, PARAMS)
+    assert out["faults"][0]["recovery_s"] is None
+    assert out["healthy_removed_s"] == 0.0 and out["false_alarms"] == 1
+    assert out["healthy_hours"] == pytest.approx((4 * 60.0 - 50.0) / 4 / 3600)
+
+
+def test_deviation_from_the_reference_and_the_used_test() -> None:
+    rec = Synthetic(60.0)
+    _dead_thruster_2(rec)
+    rec.c["north"][rec.at(10.0)] = 0.03
+    rec.c["east"][rec.at(10.0)] = 0.04  # 5 cm from the reference from 10 s on
+    u_ref = np.zeros((rec.n, 4))
+    u_ref[rec.at(10.0, 13.0), 1] = 0.05  # half the range for 3 of the first 5 s: used
+    ref = Reference(np.zeros((rec.n, 2)), u_ref)
+    out = run_metrics(rec.record(), ref, PARAMS)
+    assert out["deviation_max"] == pytest.approx(0.05)
+    assert out["deviation_rms"] == pytest.approx(0.05 * math.sqrt(50 / 60))
+    (fault,) = out["faults"]
+    assert fault["used"] is True and fault["deviation_rms"] == pytest.approx(0.05)
+    u_ref[rec.at(11.0, 13.0), 1] = 0.0  # 1 s of 5: not used
+    assert run_metrics(rec.record(), ref, PARAMS)["faults"][0]["used"] is False
+
+
+def _row(variant: str, phase_max: list[float], rms: float, healthy: bool = False) -> dict:
+    mode = variant if variant in ("none", "cap", "oracle") else "ftcap"
+    phases = [
+        {"start_s": 10.0 * j, "end_s": 10.0 * (j + 1), "deviation_max": v, "deviation_rms": v / 2}
+        for j, v in enumerate(phase_max)
+    ]
+    return {
+        "key": f"c/{variant}",
+        "case": "c",
+        "variant": variant,
+        "mode": mode,
+        "status": "ok",
+        "healthy": healthy,
+        "length_m": 0.3,
+        "phases": phases,
+        "deviation_rms": rms,
+        "replay": "ftcap-hil simulate x",
+    }
+
+
+def test_harm_is_a_phase_worse_than_1_05_x_cap_and_1_percent_of_the_length() -> None:
+    rows = [
+        _row("cap", [0.01, 0.02, 0.001], 0.02),
+        _row("oracle", [0.005, 0.01, 0.0], 0.01),
+        # 1.05 x CAP exactly (no harm); 1.5 x CAP (harm); 4 x CAP but under 3 mm (no harm)
+        _row("ftcap", [0.0105, 0.03, 0.0029], 0.03),
+    ]
+    out = {r["variant"]: r for r in derive(rows, PARAMS)}
+    assert out["ftcap"]["harm"] is True and out["ftcap"]["harm_phases"] == [1]
+    assert out["ftcap"]["dev_ratio_oracle"] == pytest.approx(3.0)
+    assert out["ftcap"]["dev_ratio_cap"] == pytest.approx(1.5)
+    assert "harm" not in out["cap"]  # CAP is the reference
+    healthy = derive([_row("ftcap", [0.0031, 0.001], 0.001, healthy=True)], PARAMS)[0]
+    assert healthy["harm"] is True and healthy["harm_phases"] == [0]  # against CAP = 0
+    assert healthy["dev_ratio_cap"] is None  # no CAP run, and its deviation would be 0
+
+
+def test_harm_unknown_when_the_cap_run_failed() -> None:
+    cap = {**_row("cap", [0.01], 0.01), "status": "failed"}
+    ftcap = derive([cap, _row("ftcap", [0.05], 0.05)], PARAMS)[1]
+    assert ftcap["harm"] is None and ftcap["dev_ratio_cap"] is None
+
+
+def test_percentiles_count_a_miss_as_never() -> None:
+    base = {
+        "key": "k",
+        "case": "c",
+        "scenario": "s",
+        "seed": 0,
+        "variant": "ftcap",
+        "mode": "ftcap",
+        "kind": "dead",
+        "status": "ok",
+    }
+    faults = [
+        {
+            "kind": "dead",
+            "detectable": True,
+            "used": True,
+            "detection_delay_s": d,
+            "isolation_delay_s": d,
+            "removal_delay_s": d,
+            "correct_isolation": d is not None,
+            "delta_error": 0.0,
+            "converge_s": d,
+            "ended": False,
+            "recovery_s": None,
+        }
+        for d in (1.0, 2.0, None)
+    ]
+    groups = {g["kind"]: g for g in fault_groups(fault_rows([{**base, "faults": faults}]))}
+    g = groups["dead"]
+    assert g["detection_rate"] == pytest.approx(2 / 3)
+    assert g["detection_delay_median"] == pytest.approx(2.0)
+    assert g["detection_delay_p95"] == math.inf
+    assert g["correct_isolation_rate"] == pytest.approx(2 / 3)
+    assert g["recovery_median"] is None  # no fault ended
+    assert groups["all"]["faults"] == 3
+
+
+def test_run_groups_pool_false_alarms_over_healthy_hours() -> None:
+    rows = [
+        {
+            "key": f"k{j}",
+            "case": f"c{j}",
+            "variant": "ftcap",
+            "mode": "ftcap",
+            "kind": "healthy",
+            "status": "ok",
+            "duration_s": 3600.0,
+            "healthy_hours": 1.0,
+            "healthy_thruster_s": 4 * 3600.0,
+            "false_alarms": j,
+            "healthy_flagged_s": 36.0,
+            "healthy_removed_s": 0.0,
+            "deviation_rms": 0.0,
+        }
+        for j in range(3)
+    ]
+    (g, _) = [g for g in run_groups(rows) if g["kind"] in ("healthy", "all")]
+    assert g["runs"] == 3 and g["false_alarm_rate_per_h"] == pytest.approx(1.0)
+    assert g["healthy_flagged_frac"] == pytest.approx(36.0 / (4 * 3600.0))
+
+
+def test_first_held_and_classify() -> None:
+    mask = np.array([0, 1, 1, 0, 1, 1, 1, 1, 0, 1], dtype=bool)
+    assert first_held(mask, 0, 10, 3) == 4
+    assert first_held(mask, 0, 10, 2) == 1
+    assert first_held(mask, 0, 10, 5) == 9  # the run reaching the end counts
+    assert first_held(mask, 0, 8, 5) == 4
+    assert first_held(np.zeros(5, dtype=bool), 0, 5, 1) is None
+    z = np.zeros(3)
+    assert classify(z, z) == "dead" and classify(z, z + 0.01) == "stuck"
+    assert classify(z + 0.5, z) == "partial" and classify(z + 1.0, z - 0.01) == "bias"
+    assert classify(z + 0.9, z + 0.01) == "mixed"
+
+
+def test_the_oracle_on_a_real_run_detects_and_isolates_at_once() -> None:
+    """The same metrics on the offline simulator's record: the oracle is told the truth."""
+    dead = FaultEvent(15.0, math.inf, 2, np.array(0.0), None)
+    sc = dataclasses.replace(
+        load_scenario("paper-4.2-ex1"), duration_s=40.0, faults=FaultSchedule(4, (dead,))
+    )
+    rec = run_mode(sc, Mode.ORACLE)
+    out = run_metrics(rec, reference_of(run_mode(sc, Mode.NONE)), PARAMS)
+    (fault,) = episodes(rec)
+    assert fault.thruster == 2 and fault.kind == "dead"
+    (row,) = out["faults"]
+    assert row["detection_delay_s"] == 0.0 and row["isolation_delay_s"] == 0.0
+    assert row["delta_error"] == 0.0 and row["correct_isolation"] is True
+    assert out["false_alarms"] == 0 and out["deviation_max"] > 0.0

@@ -405,4 +405,3 @@ class Table:
     def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
         if exc_type is None:
             self.finish()
-

@@ -41,6 +41,7 @@ from bridges.can_io.codec import (
     RawCommandMsg,
     Received,
     check_node_id,
+    check_node_ids,
 )
 from bridges.can_io.force_map import ForceRawMap
 from bridges.can_io.ports import CanReceiver, CanSender
@@ -131,9 +132,7 @@ class CanEscStatusSink(CanSender):
         owns_bus: bool = False,
     ) -> None:
         super().__init__(bus, owns_bus, "CanEscStatusSink", send_timeout_s, status_period_s)
-        self.esc_node_ids = tuple(
-            check_node_id(f"esc_node_ids[{i}]", n) for i, n in enumerate(esc_node_ids)
-        )
+        self.esc_node_ids = check_node_ids("esc_node_ids", esc_node_ids)
         if not 1 <= len(self.esc_node_ids) <= 32 or len(set(self.esc_node_ids)) != len(
             self.esc_node_ids
         ):
@@ -199,9 +198,7 @@ class CanEscStatusSource(CanReceiver):
         if not 1 <= n_thrusters <= 32:
             raise ValueError(f"n_thrusters: need 1..32, got {n_thrusters}")
         if esc_node_ids is not None:
-            esc_node_ids = [
-                check_node_id(f"esc_node_ids[{i}]", n) for i, n in enumerate(esc_node_ids)
-            ]
+            esc_node_ids = check_node_ids("esc_node_ids", esc_node_ids)
             if len(esc_node_ids) != n_thrusters:
                 raise ValueError(f"esc_node_ids: need {n_thrusters} IDs, got {len(esc_node_ids)}")
         self._esc_node_ids = None if esc_node_ids is None else tuple(esc_node_ids)

@@ -140,6 +140,11 @@ def check_node_id(name: str, node_id: int) -> int:
     return node_id
 
 
+def check_node_ids(name: str, node_ids: Iterable[int]) -> tuple[int, ...]:
+    """:func:`check_node_id` on each of ``node_ids``, naming ``name[i]`` on error."""
+    return tuple(check_node_id(f"{name}[{i}]", n) for i, n in enumerate(node_ids))
+
+
 class TransferIds:
     """Transfer ID counters, one per (source node, data type), wrapping 31 -> 0."""
 

@@ -33,7 +33,6 @@ import socket
 import struct
 import threading
 from dataclasses import dataclass, field
-from types import TracebackType
 
 from ftcap_hil.core.errors import MalformedMessage
 
@@ -190,12 +189,7 @@ class CanHub:
     def __enter__(self) -> CanHub:
         return self.start()
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.shutdown()
 
     def _run(self) -> None:

@@ -42,7 +42,6 @@ import numpy as np
 
 from bridges.mavlink.codec import (
     MAX_THRUSTERS,
-    Severity,
     SystemStatus,
     bitmask,
     odometry_from_message,
@@ -175,15 +174,13 @@ class MavlinkAllocatorLink(PortOwner):
         self.odometry.put(odometry_from_message(msg, self._port.dialect))
 
     def _on_wrench(self, msg: Any, now_ns: int) -> None:
-        if not self._port.addressed_to_me(msg.target_system, msg.target_component):
-            self._port.stats.ignored += 1
+        if not self._port.accepts(msg.target_system, msg.target_component):
             return
         assert self.config.wrench_limit is not None  # filled in by __post_init__
         self.setpoint.put(wrench_from_setpoint(msg, self.config.wrench_limit))
 
     def _on_manual(self, msg: Any, now_ns: int) -> None:
-        if not self._port.addressed_to_me(msg.target):
-            self._port.stats.ignored += 1
+        if not self._port.accepts(msg.target):
             return
         self.manual.put(wrench_from_manual(msg, self.config.max_wrench))
 
@@ -227,7 +224,7 @@ class MavlinkAllocatorLink(PortOwner):
     ) -> bool:
         """FTCAP_ESC_STATUS: per-thruster ESC telemetry (NaN = unknown, +inf age = never)."""
         n = self.config.n_thrusters
-        mask = sum(1 << i for i, f in enumerate(failed) if f)
+        mask = bitmask(tuple(failed))
         fields = (
             self._port.time_boot_ms(),
             padded(rpm, 16, "rpm"),
@@ -237,10 +234,6 @@ class MavlinkAllocatorLink(PortOwner):
             n,
         )
         return self._port.send(lambda mav: mav.ftcap_esc_status_send(*fields))
-
-    def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
-        """STATUSTEXT (chunked beyond 50 characters); False on a transport error."""
-        return self._port.send_statustext(text, severity)
 
     def set_system_status(self, status: SystemStatus) -> None:
         """MAV_STATE reported by the HEARTBEAT from now on (a change is sent at once)."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from bridges.mavlink.params import ParamSpec, ParamType
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.status import Mode
@@ -9,6 +11,19 @@ from ftcap_hil.core.status import Mode
 # Modes a running daemon may switch to, by FTC_MODE value (oracle needs the truth: never).
 MODE_CODES = {0: Mode.NONE, 1: Mode.CAP, 2: Mode.FTCAP, 3: Mode.FTCAP_LITERAL}
 CODE_OF_MODE = {mode: code for code, mode in MODE_CODES.items()}
+_MODES = "0 none, 1 cap, 2 ftcap, 3 ftcap-literal"
+
+
+def _timeout(name: str, value_s: float, description: str) -> ParamSpec:
+    """A watchdog timeout in seconds, settable while running within [0.01, 60]."""
+    return ParamSpec(name, value_s, min=0.01, max=60.0, description=description)
+
+
+def _restart_only(
+    name: str, value: float, low: float, high: float, what: str, kind: ParamType = ParamType.FLOAT
+) -> ParamSpec:
+    """A parameter that is refused while the daemon runs (it needs a restart)."""
+    return ParamSpec(name, value, kind, low, high, settable_while_running=False, description=what)
 
 
 def allocator_param_specs(
@@ -23,67 +38,21 @@ def allocator_param_specs(
     FTC_WINDOW sizes the estimator's buffers (changing it would discard the window),
     FTC_RATE_HZ fixes the deadlines and the per-cycle rate limits, FTC_UMAX is the
     hardware's amplitude limit from the vessel file: restart with a new config instead."""
-    c = core
-    mode_code = CODE_OF_MODE[c.mode]
-    inf = float("inf")
+    c, INT = core, ParamType.INT
+    mode = ParamSpec("FTC_MODE", CODE_OF_MODE[c.mode], INT, 0, 3, description=_MODES)
     return [
-        ParamSpec(
-            "FTC_MODE",
-            mode_code,
-            ParamType.INT,
-            0,
-            3,
-            description="0 none, 1 cap, 2 ftcap, 3 ftcap-literal",
-        ),
-        ParamSpec(
-            "FTC_SP_TMO",
-            setpoint_timeout_s,
-            min=0.01,
-            max=60.0,
-            description="setpoint timeout (s) -> zero thrust",
-        ),
-        ParamSpec(
-            "FTC_TLM_TMO",
-            telemetry_timeout_s,
-            min=0.01,
-            max=60.0,
-            description="telemetry timeout (s) -> estimation frozen",
-        ),
-        ParamSpec(
-            "FTC_ESC_TMO",
-            esc_timeout_s,
-            min=0.01,
-            max=60.0,
-            description="ESC silence (s) -> thruster failed",
-        ),
+        mode,
+        _timeout("FTC_SP_TMO", setpoint_timeout_s, "setpoint timeout (s) -> zero thrust"),
+        _timeout("FTC_TLM_TMO", telemetry_timeout_s, "telemetry timeout (s) -> estimation frozen"),
+        _timeout("FTC_ESC_TMO", esc_timeout_s, "ESC silence (s) -> thruster failed"),
         ParamSpec("FTC_SLACK_W", c.allocator.slack_weight, min=1e-3, max=1e12),
         ParamSpec("FTC_EFFORT_W", c.allocator.effort_weight, min=1e-9, max=1e6),
         ParamSpec("FTC_DEAD_THR", c.allocator.dead_threshold, min=0.0, max=0.99),
         ParamSpec("FTC_DITHER", c.excitation.dither_amplitude, min=0.0, max=0.5),
-        ParamSpec("FTC_PROBE_INT", c.excitation.probe_interval, ParamType.INT, 0, 1e6),
-        ParamSpec(
-            "FTC_WINDOW",
-            c.estimator.window,
-            ParamType.INT,
-            2,
-            10000,
-            settable_while_running=False,
-            description="estimator window (restart)",
+        ParamSpec("FTC_PROBE_INT", c.excitation.probe_interval, INT, 0, 1e6),
+        _restart_only(
+            "FTC_WINDOW", c.estimator.window, 2, 10000, "estimator window (restart)", INT
         ),
-        ParamSpec(
-            "FTC_RATE_HZ",
-            rate_hz,
-            min=0.1,
-            max=2000.0,
-            settable_while_running=False,
-            description="loop rate (restart)",
-        ),
-        ParamSpec(
-            "FTC_UMAX",
-            u_max_n,
-            min=0.0,
-            max=inf,
-            settable_while_running=False,
-            description="thruster limit (vessel file)",
-        ),
+        _restart_only("FTC_RATE_HZ", rate_hz, 0.1, 2000.0, "loop rate (restart)"),
+        _restart_only("FTC_UMAX", u_max_n, 0.0, math.inf, "thruster limit (vessel file)"),
     ]

@@ -121,7 +121,8 @@ def bitmask(flags: tuple[bool, ...]) -> int:
     return sum(1 << i for i, f in enumerate(flags) if f)
 
 
-def _bits(mask: int, n: int) -> tuple[bool, ...]:
+def bits(mask: int, n: int) -> tuple[bool, ...]:
+    """The first ``n`` bits of ``mask`` as flags (the inverse of :func:`bitmask`)."""
     return tuple(bool(mask >> i & 1) for i in range(n))
 
 
@@ -140,7 +141,7 @@ def status_from_message(msg: Any) -> AllocatorStatus:
     if not all(np.all(np.isfinite(a)) for a in arrays):
         raise MalformedMessage("FTCAP_STATUS: non-finite values")
     flags = StatusFlag(int(msg.flags) & sum(StatusFlag))
-    faulty = _bits(int(getattr(msg, "faulty", 0)), n)
+    faulty = bits(int(getattr(msg, "faulty", 0)), n)
     if StatusFlag.FAULT_DETECTED in flags and not any(faulty):
         faulty = (True,) * n
     tau, unallocated, delta_hat, f_hat = (tuple(a.tolist()) for a in arrays)
@@ -152,7 +153,7 @@ def status_from_message(msg: Any) -> AllocatorStatus:
         f_hat=f_hat,
         tau_demand=tau,
         unallocated=unallocated,
-        saturated=_bits(int(getattr(msg, "saturated", 0)), n),
+        saturated=bits(int(getattr(msg, "saturated", 0)), n),
         faulty=faulty,
-        probing=_bits(int(getattr(msg, "probing", 0)), n),
+        probing=bits(int(getattr(msg, "probing", 0)), n),
     )

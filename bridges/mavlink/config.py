@@ -51,6 +51,7 @@ class LinkConfigError(ConfigError):
 
 
 def parse_host_port(key: str, value: str) -> tuple[str, int]:
+    """``"host:port"`` -> (host, port); LinkConfigError naming ``key`` otherwise."""
     host, sep, port = value.rpartition(":")
     if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
         raise LinkConfigError(f"{key}: expected 'host:port', got {value!r}")
@@ -96,12 +97,15 @@ class MavlinkEndpoint:
 
 
 def default_gcs_endpoint() -> MavlinkEndpoint:
+    """The ground station's inbox, sending to the allocator and the vessel."""
     return MavlinkEndpoint.inbox(GCS_PORT, GCS_IDS, (ALLOCATOR_PORT, VESSEL_PORT))
 
 
 def default_allocator_endpoint() -> MavlinkEndpoint:
+    """The allocator's inbox, sending to the ground station."""
     return MavlinkEndpoint.inbox(ALLOCATOR_PORT, ALLOCATOR_IDS, (GCS_PORT,))
 
 
 def default_vessel_endpoint() -> MavlinkEndpoint:
+    """The vessel's inbox, sending to the allocator and the ground station."""
     return MavlinkEndpoint.inbox(VESSEL_PORT, VESSEL_IDS, (ALLOCATOR_PORT, GCS_PORT))

@@ -32,6 +32,7 @@ from typing import Any
 from bridges.mavlink.codec import (
     Severity,
     SystemStatus,
+    bits,
     odometry_from_message,
     status_from_message,
 )
@@ -153,7 +154,7 @@ class MavlinkGcsLink(PortOwner):
     def _on_esc(self, msg: Any, now_ns: int) -> None:
         if self._from(msg, self.allocator_ids):
             n = int(msg.n_thrusters)
-            failed = tuple(bool(msg.failed >> i & 1) for i in range(n))
+            failed = bits(int(msg.failed), n)
             self.esc_status.put(
                 EscReport(tuple(msg.rpm[:n]), tuple(msg.current[:n]), tuple(msg.age[:n]), failed)
             )
@@ -188,8 +189,7 @@ class MavlinkGcsLink(PortOwner):
             self._cond.notify_all()
 
     def _on_command_ack(self, msg: Any, now_ns: int) -> None:
-        if not self._port.addressed_to_me(msg.target_system, msg.target_component):
-            self._port.stats.ignored += 1
+        if not self._port.accepts(msg.target_system, msg.target_component):
             return
         with self._cond:
             self._acks[(self._src(msg), msg.command)] = MavResult(msg.result)

@@ -171,6 +171,13 @@ class MavlinkPort:
             return False
         return target_component is None or target_component in (0, self.component_id)
 
+    def accepts(self, target_system: int, target_component: int | None = None) -> bool:
+        """:meth:`addressed_to_me`, counting a message for someone else in ``stats.ignored``."""
+        if self.addressed_to_me(target_system, target_component):
+            return True
+        self.stats.ignored += 1
+        return False
+
     # --- sending (any thread) ---
 
     def send(self, build: Callable[[Any], None]) -> bool:
@@ -338,6 +345,10 @@ class PortOwner:
     @property
     def is_alive(self) -> bool:
         return self._port.is_alive
+
+    def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
+        """STATUSTEXT (chunked beyond 50 characters); False on a transport error."""
+        return self._port.send_statustext(text, severity)
 
     def shutdown(self) -> None:
         """Stop the port's dispatch thread and close its connection. Idempotent."""

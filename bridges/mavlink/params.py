@@ -195,11 +195,7 @@ class ParamService:
 
     def _for_me(self, msg: Any) -> bool:
         port = self._port
-        if port is None or not port.addressed_to_me(msg.target_system, msg.target_component):
-            if port is not None:
-                port.stats.ignored += 1
-            return False
-        return True
+        return port is not None and port.accepts(msg.target_system, msg.target_component)
 
     def _on_request_list(self, msg: Any, now_ns: int) -> None:
         if self._for_me(msg):

@@ -172,8 +172,7 @@ class MavlinkVesselLink(PortOwner):
 
     def _on_command(self, msg: Any, now_ns: int) -> None:
         port = self._port
-        if not port.addressed_to_me(msg.target_system, msg.target_component):
-            port.stats.ignored += 1
+        if not port.accepts(msg.target_system, msg.target_component):
             return
         if msg.command != MAV_CMD_INJECT_FAILURE:
             if msg.target_component == port.component_id:  # broadcasts are not ours to refuse
@@ -227,7 +226,3 @@ class MavlinkVesselLink(PortOwner):
     def drain_faults(self) -> list[Stamped[FaultInjection]]:
         """All queued fault injections, oldest first."""
         return self.faults.drain()
-
-    def send_statustext(self, text: str, severity: Severity = Severity.INFO) -> bool:
-        """STATUSTEXT (chunked beyond 50 characters); False on a transport error."""
-        return self._port.send_statustext(text, severity)

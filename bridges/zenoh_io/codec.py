@@ -5,14 +5,14 @@ field ``"v": 1``. JSON rather than a fixed binary struct: any Zenoh tool can rea
 (``z_sub``) or send one by hand (``z_put``), and the thruster count m varies (its cost against
 the latency budget: docs/decisions.md).
 
-Rules shared by every payload:
+Rules shared by every payload (their readers and writers: :mod:`bridges.zenoh_io.fields`):
 
 * a wrench is always an object ``{"X_N": X, "Y_N": Y, "N_Nm": N}`` (body frame, Fossen);
 * per-thruster quantities are arrays in the order of the vessel file;
 * numbers must be finite; ``null`` is used where the message type allows "unknown"
   (``time_s``, a fault ``value``, a port age that is +inf);
 * decoders ignore unknown fields (additive changes keep ``v = 1``; a breaking change bumps it)
-  and raise :class:`~ftcap_hil.core.messages.MalformedMessage` for anything else that is wrong:
+  and raise :class:`~ftcap_hil.core.errors.MalformedMessage` for anything else that is wrong:
   not JSON, wrong ``v``, missing field, wrong type (``true`` is not a number), wrong length,
   NaN/Infinity, out-of-range value, or a payload above :data:`MAX_PAYLOAD_BYTES`.
 
@@ -40,7 +40,6 @@ Example setpoint: ``{"v":1,"X_N":1200.0,"Y_N":0.0,"N_Nm":-350.0}``.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from collections.abc import Mapping
@@ -49,22 +48,52 @@ from typing import Any
 
 import numpy as np
 
+from bridges.zenoh_io.fields import (
+    MAX_PAYLOAD_BYTES,
+    VERSION,
+    WRENCH_FIELDS,
+    boolean,
+    dump,
+    finite_list,
+    get_field,
+    integer,
+    load,
+    number,
+    optional_float,
+    vector,
+    wrench,
+    wrench_obj,
+)
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import (
     FaultInjection,
     FaultKind,
-    FloatArray,
     Odometry,
     ThrusterCommand,
     WrenchSetpoint,
 )
 from ftcap_hil.core.status import AllocatorStatus, Mode
 
-VERSION = 1
-MAX_PAYLOAD_BYTES = 65536
+__all__ = [
+    "KEY_PREFIX",
+    "MAX_PAYLOAD_BYTES",
+    "VERSION",
+    "WRENCH_FIELDS",
+    "ZenohKeys",
+    "decode_fault_injection",
+    "decode_odometry",
+    "decode_status",
+    "decode_thruster_command",
+    "decode_wrench_setpoint",
+    "encode_fault_injection",
+    "encode_odometry",
+    "encode_status",
+    "encode_thruster_command",
+    "encode_wrench_setpoint",
+]
+
 KEY_PREFIX = "ftcap"
 _VESSEL_NAME = re.compile(r"[A-Za-z0-9_-]+")
-_WRENCH_FIELDS = ("X_N", "Y_N", "N_Nm")
 _ETA_FIELDS = ("north_m", "east_m", "psi_rad")
 _NU_FIELDS = ("u_mps", "v_mps", "r_radps")
 
@@ -98,146 +127,43 @@ class ZenohKeys:
         )
 
 
-# --------------------------------------------------------------------------- helpers
-
-
-def _dump(obj: dict[str, Any]) -> bytes:
-    try:
-        return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
-    except ValueError as e:  # allow_nan=False: a NaN/inf reached the encoder
-        raise MalformedMessage(f"cannot encode non-finite value: {e}") from e
-
-
-def _finite_list(name: str, value: object, length: int | None = None) -> list[float]:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise MalformedMessage(f"{name}: not a numeric vector: {e}") from e
-    if arr.ndim != 1 or (length is not None and arr.shape[0] != length):
-        raise MalformedMessage(f"{name}: expected a vector of length {length}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise MalformedMessage(f"{name}: non-finite value in {arr.tolist()}")
-    out: list[float] = arr.tolist()
-    return out
-
-
-def _wrench_obj(name: str, tau: object) -> dict[str, float]:
-    return dict(zip(_WRENCH_FIELDS, _finite_list(name, tau, 3), strict=True))
-
-
-def _optional_float(value: float) -> float | None:
-    return None if math.isnan(value) else float(value)
-
-
-def _load(payload: bytes | bytearray | memoryview | str) -> dict[str, Any]:
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise MalformedMessage(f"payload of {len(payload)} bytes > {MAX_PAYLOAD_BYTES}")
-    try:
-        text = payload if isinstance(payload, str) else bytes(payload).decode("utf-8")
-        obj = json.loads(text, parse_constant=_reject_constant)
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
-        raise MalformedMessage(f"not a JSON payload: {e}") from e
-    if not isinstance(obj, dict):
-        raise MalformedMessage(f"expected a JSON object, got {type(obj).__name__}")
-    if obj.get("v") != VERSION or isinstance(obj.get("v"), bool):
-        raise MalformedMessage(f"unsupported version v={obj.get('v')!r} (expected {VERSION})")
-    return obj
-
-
-def _reject_constant(name: str) -> float:
-    raise MalformedMessage(f"non-finite constant {name} in payload")
-
-
-def _get(obj: Mapping[str, Any], key: str) -> Any:
-    try:
-        return obj[key]
-    except KeyError:
-        raise MalformedMessage(f"missing field {key!r}") from None
-
-
-def _number(obj: Mapping[str, Any], key: str, *, nullable: bool = False) -> float:
-    value = _get(obj, key)
-    if value is None and nullable:
-        return math.nan
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise MalformedMessage(f"{key}: expected a number, got {value!r}")
-    if not math.isfinite(value):  # 1e999 parses to inf
-        raise MalformedMessage(f"{key}: non-finite value {value!r}")
-    return float(value)
-
-
-def _integer(obj: Mapping[str, Any], key: str, minimum: int = 0) -> int:
-    value = _get(obj, key)
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise MalformedMessage(f"{key}: expected an integer >= {minimum}, got {value!r}")
-    return value
-
-
-def _boolean(obj: Mapping[str, Any], key: str) -> bool:
-    value = _get(obj, key)
-    if not isinstance(value, bool):
-        raise MalformedMessage(f"{key}: expected true/false, got {value!r}")
-    return value
-
-
-def _vector(obj: Mapping[str, Any], key: str, length: int | None = None) -> FloatArray:
-    value = _get(obj, key)
-    if not isinstance(value, list) or (length is not None and len(value) != length):
-        want = "a list" if length is None else f"a list of {length}"
-        raise MalformedMessage(f"{key}: expected {want} numbers, got {value!r:.80}")
-    if any(isinstance(x, bool) or not isinstance(x, int | float) for x in value):
-        raise MalformedMessage(f"{key}: expected numbers only, got {value!r:.80}")
-    arr = np.array(value, dtype=np.float64)
-    if not np.all(np.isfinite(arr)):
-        raise MalformedMessage(f"{key}: non-finite value in {value!r:.80}")
-    return arr
-
-
-def _wrench(obj: Mapping[str, Any], key: str | None = None) -> FloatArray:
-    """Read {X_N, Y_N, N_Nm} from ``obj`` itself (key None) or from ``obj[key]``."""
-    src = obj if key is None else _get(obj, key)
-    if not isinstance(src, dict):
-        raise MalformedMessage(f"{key}: expected a wrench object, got {src!r:.80}")
-    return np.array([_number(src, k) for k in _WRENCH_FIELDS], dtype=np.float64)
-
-
 # --------------------------------------------------------------------------- messages
 
 
 def encode_wrench_setpoint(msg: WrenchSetpoint) -> bytes:
     """``setpoint/wrench`` payload; MalformedMessage for a non-finite wrench."""
-    return _dump({"v": VERSION, **_wrench_obj("wrench", msg.tau)})
+    return dump(wrench_obj("wrench", msg.tau))
 
 
 def decode_wrench_setpoint(payload: bytes | str) -> WrenchSetpoint:
     """The wrench of a ``setpoint/wrench`` payload; MalformedMessage if invalid."""
-    return WrenchSetpoint(_wrench(_load(payload)))
+    return WrenchSetpoint(wrench(load(payload)))
 
 
 def encode_odometry(msg: Odometry) -> bytes:
     """``telemetry/odometry`` payload (NaN ``time_s`` as null); MalformedMessage if not finite."""
-    eta = dict(zip(_ETA_FIELDS, _finite_list("eta", msg.eta, 3), strict=True))
-    nu = dict(zip(_NU_FIELDS, _finite_list("nu", msg.nu, 3), strict=True))
-    return _dump({"v": VERSION, **eta, **nu, "time_s": _optional_float(msg.time_s)})
+    eta = dict(zip(_ETA_FIELDS, finite_list("eta", msg.eta, 3), strict=True))
+    nu = dict(zip(_NU_FIELDS, finite_list("nu", msg.nu, 3), strict=True))
+    return dump({**eta, **nu, "time_s": optional_float(msg.time_s)})
 
 
 def decode_odometry(payload: bytes | str) -> Odometry:
     """eta, nu and time_s (NaN if null or absent) of a payload; MalformedMessage if invalid."""
-    obj = _load(payload)
-    eta = np.array([_number(obj, k) for k in _ETA_FIELDS], dtype=np.float64)
-    nu = np.array([_number(obj, k) for k in _NU_FIELDS], dtype=np.float64)
-    time_s = _number(obj, "time_s", nullable=True) if "time_s" in obj else math.nan
+    obj = load(payload)
+    eta = np.array([number(obj, k) for k in _ETA_FIELDS], dtype=np.float64)
+    nu = np.array([number(obj, k) for k in _NU_FIELDS], dtype=np.float64)
+    time_s = number(obj, "time_s", nullable=True) if "time_s" in obj else math.nan
     return Odometry(eta, nu, time_s)
 
 
 def encode_thruster_command(msg: ThrusterCommand) -> bytes:
     """``thrusters/command`` payload (u in N); MalformedMessage for a non-finite force."""
-    return _dump({"v": VERSION, "u_N": _finite_list("u_N", msg.u)})
+    return dump({"u_N": finite_list("u_N", msg.u)})
 
 
 def decode_thruster_command(payload: bytes | str, m: int | None = None) -> ThrusterCommand:
     """``m``: expected number of thrusters, or None to accept any non-empty length."""
-    u = _vector(_load(payload), "u_N", m)
+    u = vector(load(payload), "u_N", m)
     if u.shape[0] == 0:
         raise MalformedMessage("u_N: empty thruster command")
     return ThrusterCommand(u)
@@ -257,21 +183,21 @@ def encode_fault_injection(msg: FaultInjection) -> bytes:
     if math.isinf(msg.value):
         raise MalformedMessage(f"value: non-finite value {msg.value}")
     _check_fault(msg.index, msg.kind, msg.value, None)
-    body = {"index": msg.index, "kind": msg.kind.value, "value": _optional_float(msg.value)}
-    return _dump({"v": VERSION, **body})
+    body = {"index": msg.index, "kind": msg.kind.value, "value": optional_float(msg.value)}
+    return dump(body)
 
 
 def decode_fault_injection(payload: bytes | str, m: int | None = None) -> FaultInjection:
     """``m``: number of thrusters, to refuse an index that does not exist (None: no check)."""
-    obj = _load(payload)
-    index = _integer(obj, "index")
-    kind_text = _get(obj, "kind")
+    obj = load(payload)
+    index = integer(obj, "index")
+    kind_text = get_field(obj, "kind")
     try:
         kind = FaultKind(kind_text)
     except ValueError:
         known = [k.value for k in FaultKind]
         raise MalformedMessage(f"kind: {kind_text!r} is not one of {known}") from None
-    value = _number(obj, "value", nullable=True) if "value" in obj else math.nan
+    value = number(obj, "value", nullable=True) if "value" in obj else math.nan
     _check_fault(index, kind, value, m)
     return FaultInjection(index, kind, value)
 
@@ -282,7 +208,7 @@ def decode_fault_injection(payload: bytes | str, m: int | None = None) -> FaultI
 def encode_status(status: AllocatorStatus) -> bytes:
     """Encode a status; raise MalformedMessage for mismatched lengths or non-finite values."""
     s = status
-    delta_hat = _finite_list("delta_hat", s.delta_hat)
+    delta_hat = finite_list("delta_hat", s.delta_hat)
     m = len(delta_hat)
     flags = {name: _flags(name, getattr(s, name), m) for name in _FLAG_FIELDS}
     if any(len(v) not in (0, m) for v in (s.esc_rpm, s.esc_current_a, s.esc_age_s, s.delta_std)):
@@ -296,39 +222,44 @@ def encode_status(status: AllocatorStatus) -> bytes:
         "degraded": bool(s.degraded),
         "estimation_frozen": bool(s.estimation_frozen),
         "delta_hat": delta_hat,
-        "delta_std": _finite_list("delta_std", s.delta_std) if s.delta_std else [],
-        "f_hat_N": _finite_list("f_hat", s.f_hat, m),
-        "bf_hat": _wrench_obj("bf_hat", s.bf_hat),
-        "u_N": _finite_list("u", s.u, m),
-        "tau_demand": _wrench_obj("tau_demand", s.tau_demand or (0.0,) * 3),
-        "tau_unallocated": _wrench_obj("tau_unallocated", s.unallocated),
+        "delta_std": finite_list("delta_std", s.delta_std) if s.delta_std else [],
+        "f_hat_N": finite_list("f_hat", s.f_hat, m),
+        "bf_hat": wrench_obj("bf_hat", s.bf_hat),
+        "u_N": finite_list("u", s.u, m),
+        "tau_demand": wrench_obj("tau_demand", s.tau_demand or (0.0,) * 3),
+        "tau_unallocated": wrench_obj("tau_unallocated", s.unallocated),
         **flags,
         "port_age_s": {k: (None if math.isinf(v) else float(v)) for k, v in ages.items()},
         "stale": {"setpoint": bool(s.setpoint_stale), "telemetry": bool(s.telemetry_stale)},
         "malformed": int(s.malformed),
-        "esc_rpm": [_optional_float(float(v)) for v in s.esc_rpm],
-        "esc_current_A": [_optional_float(float(v)) for v in s.esc_current_a],
+        "esc_rpm": [optional_float(float(v)) for v in s.esc_rpm],
+        "esc_current_A": [optional_float(float(v)) for v in s.esc_current_a],
     }
-    return _dump({"v": VERSION, **body})
+    return dump(body)
 
 
 _FLAG_FIELDS = ("saturated", "faulty", "esc_failed", "probing", "observable")
 
 
+def _flag_lengths(name: str, m: int) -> tuple[int, ...]:
+    # ``saturated`` is v1 and always has m flags; the fields added after v1 may be empty.
+    return (m,) if name == "saturated" else (0, m)
+
+
 def _flags(name: str, value: tuple[bool, ...], m: int) -> list[bool]:
     flags = [bool(f) for f in value]
-    if len(flags) not in ((m,) if name == "saturated" else (0, m)):
+    if len(flags) not in _flag_lengths(name, m):
         raise MalformedMessage(f"{name}: expected {m} flags, got {len(flags)}")
     return flags
 
 
 def decode_status(payload: bytes | str) -> AllocatorStatus:
     """The status of a payload; fields added after v1 are optional (their defaults)."""
-    obj = _load(payload)
-    delta_hat = _vector(obj, "delta_hat")
+    obj = load(payload)
+    delta_hat = vector(obj, "delta_hat")
     m = delta_hat.shape[0]
-    ages = _port_ages(_get(obj, "port_age_s"))
-    stale = _port_flags(_get(obj, "stale"))
+    ages = _port_ages(get_field(obj, "port_age_s"))
+    stale = _port_flags(get_field(obj, "stale"))
     flags: dict[str, Any] = {
         name: _flag_list(obj, name, m)
         for name in _FLAG_FIELDS
@@ -341,25 +272,25 @@ def decode_status(payload: bytes | str) -> AllocatorStatus:
     }
     esc_ages = tuple(ages[f"esc{i + 1}"] for i in range(m) if f"esc{i + 1}" in ages)
     return AllocatorStatus(
-        mode=_mode(_get(obj, "mode")),
-        cycle=_integer(obj, "cycle"),
-        overruns=_integer(obj, "overruns"),
-        degraded=_boolean(obj, "degraded"),
-        estimation_frozen=_boolean(obj, "estimation_frozen")
+        mode=_mode(get_field(obj, "mode")),
+        cycle=integer(obj, "cycle"),
+        overruns=integer(obj, "overruns"),
+        degraded=boolean(obj, "degraded"),
+        estimation_frozen=boolean(obj, "estimation_frozen")
         if "estimation_frozen" in obj
         else False,
         delta_hat=tuple(delta_hat.tolist()),
-        delta_std=tuple(_vector(obj, "delta_std").tolist()) if obj.get("delta_std") else (),
-        f_hat=tuple(_vector(obj, "f_hat_N", m).tolist()),
-        bf_hat=tuple(_wrench(obj, "bf_hat").tolist()),
-        u=tuple(_vector(obj, "u_N", m).tolist()),
-        tau_demand=tuple(_wrench(obj, "tau_demand").tolist()) if "tau_demand" in obj else (),
-        unallocated=tuple(_wrench(obj, "tau_unallocated").tolist()),
+        delta_std=tuple(vector(obj, "delta_std").tolist()) if obj.get("delta_std") else (),
+        f_hat=tuple(vector(obj, "f_hat_N", m).tolist()),
+        bf_hat=tuple(wrench(obj, "bf_hat").tolist()),
+        u=tuple(vector(obj, "u_N", m).tolist()),
+        tau_demand=tuple(wrench(obj, "tau_demand").tolist()) if "tau_demand" in obj else (),
+        unallocated=tuple(wrench(obj, "tau_unallocated").tolist()),
         setpoint_stale=stale.get("setpoint", False),
         telemetry_stale=stale.get("telemetry", False),
         setpoint_age_s=ages.get("setpoint", math.inf),
         telemetry_age_s=ages.get("telemetry", math.inf),
-        malformed=_integer(obj, "malformed") if "malformed" in obj else 0,
+        malformed=integer(obj, "malformed") if "malformed" in obj else 0,
         esc_age_s=esc_ages if len(esc_ages) == m else (),
         **flags,
         **esc,
@@ -378,10 +309,9 @@ def _mode(value: object) -> Mode | None:
 
 
 def _flag_list(obj: Mapping[str, Any], key: str, m: int) -> tuple[bool, ...]:
-    """m flags (``saturated``), or m or none (the fields added after v1)."""
-    value = _get(obj, key)
-    lengths = (m,) if key == "saturated" else (0, m)
-    if not isinstance(value, list) or len(value) not in lengths:
+    """The flags of field ``key``, as many as :func:`_flag_lengths` allows."""
+    value = get_field(obj, key)
+    if not isinstance(value, list) or len(value) not in _flag_lengths(key, m):
         raise MalformedMessage(f"{key}: expected a list of {m} flags, got {value!r:.80}")
     if not all(isinstance(x, bool) for x in value):
         raise MalformedMessage(f"{key}: expected true/false flags, got {value!r:.80}")
@@ -390,18 +320,18 @@ def _flag_list(obj: Mapping[str, Any], key: str, m: int) -> tuple[bool, ...]:
 
 def _optional_vector(obj: Mapping[str, Any], key: str, m: int) -> list[float]:
     """A list of m numbers or nulls (null: unknown, NaN)."""
-    value = _get(obj, key)
+    value = get_field(obj, key)
     if not isinstance(value, list) or len(value) not in (0, m):
         raise MalformedMessage(f"{key}: expected a list of {m} numbers or nulls, got {value!r:.80}")
     named = {f"{key}[{i}]": x for i, x in enumerate(value)}
-    return [_number(named, f"{key}[{i}]", nullable=True) for i in range(len(value))]
+    return [number(named, f"{key}[{i}]", nullable=True) for i in range(len(value))]
 
 
 def _port_ages(value: object) -> dict[str, float]:
     if not isinstance(value, dict):
         raise MalformedMessage(f"port_age_s: expected an object, got {value!r:.80}")
     named = {f"port_age_s.{port}": age for port, age in value.items()}
-    ages = {port: _number(named, f"port_age_s.{port}", nullable=True) for port in value}
+    ages = {port: number(named, f"port_age_s.{port}", nullable=True) for port in value}
     if any(age < 0.0 for age in ages.values()):
         raise MalformedMessage(f"port_age_s: negative age in {ages}")
     return {port: math.inf if math.isnan(age) else age for port, age in ages.items()}
@@ -411,4 +341,4 @@ def _port_flags(value: object) -> dict[str, bool]:
     if not isinstance(value, dict):
         raise MalformedMessage(f"stale: expected an object, got {value!r:.80}")
     named = {f"stale.{port}": flag for port, flag in value.items()}
-    return {port: _boolean(named, f"stale.{port}") for port in value}
+    return {port: boolean(named, f"stale.{port}") for port in value}

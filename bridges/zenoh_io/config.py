@@ -54,6 +54,8 @@ class ZenohConfigError(ConfigError):
 
 
 class ZenohRole(enum.Enum):
+    """A Zenoh session's mode (``mode`` in the JSON5 config)."""
+
     ROUTER = "router"  # the allocator daemon: listens
     PEER = "peer"
     CLIENT = "client"  # vessel, ground station: connect to the router
@@ -116,6 +118,7 @@ def endpoint_host(locator: str) -> str | None:
 
 
 def binds_all_interfaces(locator: str) -> bool:
+    """The locator listens on every interface: an empty host, 0.0.0.0, [::] and the like."""
     host = endpoint_host(locator)
     if host is None:
         return False

@@ -2,8 +2,8 @@
 
 Call order per cycle t (Algorithm 1 of the paper):
 
-    w = plant.measured_wrench(x(t-1), x(t), dt)      # by the caller, from telemetry
-    result = core.step(tau_d(t), w)                  # w = None when telemetry is stale
+    sample = Observation(x(t-1), x(t), dt)           # by the caller, from telemetry
+    result = core.step(tau_d(t), sample)             # None when telemetry is stale
     send(result.u)
 
 ``step`` assumes that the command acting over the last estimation interval is the one it
@@ -56,9 +56,7 @@ class CoreConfig:
     allocator: AllocatorConfig = field(default_factory=AllocatorConfig)
     excitation: ExcitationConfig = field(default_factory=ExcitationConfig)
     # Fault flags, with hysteresis: flagged when delta_hat drops below fault_threshold,
-    # cleared when it rises above fault_clear. Flags only change on estimates the window
-    # determines (window_len >= m + k): right after a restart the estimate explains one or
-    # two samples by a minimum change and may dip transiently on healthy thrusters.
+    # cleared when it rises above fault_clear (when each stage may change them: estimation.py).
     fault_threshold: float = 0.85
     fault_clear: float = 0.95
 

@@ -75,7 +75,10 @@ class EstimationStage(Protocol):
 
     def update(
         self, sample: Sample | None, u_sample: FloatArray, truth: Truth | None
-    ) -> StageOutput: ...
+    ) -> StageOutput:
+        """One estimation sample (None: none new) with the command ``u_sample`` (m,) N that
+        acted over it; ``truth``: the true faults (the oracle only)."""
+        ...
 
 
 def _identity(m: int, k: int) -> StageOutput:
@@ -92,6 +95,7 @@ class IdentityStage:
     def update(
         self, sample: Sample | None, u_sample: FloatArray, truth: Truth | None
     ) -> StageOutput:
+        """Always the identity (delta = 1, b = 0, no flag)."""
         return self._out
 
 
@@ -105,6 +109,7 @@ class OracleStage:
     def update(
         self, sample: Sample | None, u_sample: FloatArray, truth: Truth | None
     ) -> StageOutput:
+        """The true faults as the estimate; ValueError without ``truth``."""
         if truth is None:
             raise ValueError("oracle mode needs the true faults")
         bf = self._B @ truth.f
@@ -120,11 +125,13 @@ class _Hysteresis:
         self._on, self._off = on, off
 
     def update(self, d: FloatArray) -> BoolArray:
+        """New flags (m,) for the effectiveness ``d`` (m,)."""
         self._flags = np.where(self._flags, d < self._off, d < self._on)
         return self._flags.copy()
 
     @property
     def flags(self) -> BoolArray:
+        """The current flags (a copy)."""
         return self._flags.copy()
 
 
@@ -163,6 +170,8 @@ class WindowedStage:
     def update(
         self, sample: Sample | None, u_sample: FloatArray, truth: Truth | None
     ) -> StageOutput:
+        """Fit one sample (an Observation is inverted to a wrench first); a missing or
+        non-finite sample holds the last output."""
         w = None if sample is None else self._wrench(sample)
         if w is None:
             return self._out
@@ -198,6 +207,7 @@ class KalmanStage:
     def update(
         self, sample: Sample | None, u_sample: FloatArray, truth: Truth | None
     ) -> StageOutput:
+        """Filter one Observation and decide; ValueError for a bare wrench."""
         if sample is None:
             return self._out
         if not isinstance(sample, Observation):

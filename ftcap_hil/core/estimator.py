@@ -305,9 +305,7 @@ class LiteralEstimator:
             g += Phi.T @ r
         gamma = np.linalg.solve(H, g)
         self.delta = np.clip(self.delta + gamma, 0.0, 1.0)
-        return Estimate(
-            self.delta.copy(), self.bf.copy(), self._pinv @ self.bf, 0.0, len(self._hist)
-        )
+        return self.estimate()
 
     def estimate(self) -> Estimate:
         """The current estimate (copies)."""

@@ -35,149 +35,24 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, replace
-from typing import Protocol
 
 import numpy as np
 
 from ftcap_hil.core.estimator import Estimate, EstimatorConfig
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.step_models import LinearStep, StepModel, VesselStep, inv_small, step_model
 
-
-class StepModel(Protocol):
-    """One step of the allocator's plant model on its dynamic state s (k,).
-
-    ``predict(s0, w, dt)`` -> (s1, A, G): the state after ``dt`` under the constant actuator
-    wrench ``w`` (k,), and the Jacobians A = ds1/ds0 (k x k) and G = ds1/dw (k x k).
-    """
-
-    @property
-    def k(self) -> int: ...
-
-    def dynamic_state(self, x: FloatArray) -> FloatArray: ...
-
-    def predict(
-        self, s0: FloatArray, w: FloatArray, dt: float
-    ) -> tuple[FloatArray, FloatArray, FloatArray]: ...
-
-
-@dataclass(frozen=True)
-class LinearStep:
-    """x(t+1) = a x(t) + b_v w: the discrete plant of section 4.1 (exact)."""
-
-    plant: LinearPlant
-    k: int = 1
-
-    def dynamic_state(self, x: FloatArray) -> FloatArray:
-        return np.asarray(x[:1], dtype=np.float64)
-
-    def predict(
-        self, s0: FloatArray, w: FloatArray, dt: float
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        p = self.plant
-        return (
-            np.array([p.a * s0[0] + p.b_v * w[0]]),
-            np.array([[p.a]]),
-            np.array([[p.b_v]]),
-        )
-
-
-class VesselStep:
-    """nu(t+1) of a 3-DOF vessel with nu_dot = M^-1 (w - n(nu)), n = (C + D) nu.
-
-    "euler": nu1 = nu0 + dt nu_dot(nu0) (the paper's discrete model, exact for its truth);
-    "trapezoid": the explicit midpoint step nu1 = nu0 + dt nu_dot(nu0 + dt/2 nu_dot(nu0)).
-    The Jacobian of n is analytic for the paper's vessel and taken by forward differences
-    otherwise (any plant with ``nu_dot`` and ``mass_matrix`` works, the general Fossen
-    model included).
-    """
-
-    k = 3
-
-    def __init__(self, plant: SurfaceVessel) -> None:
-        self.plant = plant
-        self._minv = np.asarray(np.linalg.inv(plant.mass_matrix), dtype=np.float64)
-        self._inertia = np.diag(plant.mass_matrix).copy()
-        self._euler = plant.inversion == "euler"
-        self._analytic = type(plant) is SurfaceVessel
-
-    def dynamic_state(self, x: FloatArray) -> FloatArray:
-        return np.asarray(x[3:6], dtype=np.float64)
-
-    def _jacobian(self, nu: FloatArray, w: FloatArray, f0: FloatArray) -> FloatArray:
-        """d nu_dot / d nu at nu (3 x 3)."""
-        if self._analytic:
-            p, (u, v, r) = self.plant, nu
-            m = p.mass_kg
-            dn = np.array(
-                [
-                    [2.0 * p.beta_u * abs(u), -m * r, -m * v],
-                    [m * r, 2.0 * p.beta_v * abs(v), m * u],
-                    [0.0, 0.0, 2.0 * p.beta_r * abs(r)],
-                ]
-            )
-            out: FloatArray = -dn / self._inertia[:, None]
-            return out
-        jac = np.empty((3, 3))
-        for j in range(3):
-            h = 1e-7 * (1.0 + abs(nu[j]))
-            nu_h = nu.copy()
-            nu_h[j] += h
-            jac[:, j] = (self.plant.nu_dot(nu_h, w) - f0) / h
-        return jac
-
-    def predict(
-        self, s0: FloatArray, w: FloatArray, dt: float
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        f0 = self.plant.nu_dot(s0, w)
-        j0 = self._jacobian(s0, w, f0)
-        if self._euler:
-            A = dt * j0
-            A[np.diag_indices(3)] += 1.0
-            return s0 + dt * f0, A, dt * self._minv
-        half = s0 + 0.5 * dt * f0
-        f1 = self.plant.nu_dot(half, w)
-        j1 = self._jacobian(half, w, f1)
-        d_half = 0.5 * dt * j0  # d half / d s0, minus I
-        d_half[np.diag_indices(3)] += 1.0
-        A = dt * j1 @ d_half
-        A[np.diag_indices(3)] += 1.0
-        G = dt * (self._minv + j1 @ (0.5 * dt * self._minv))
-        return s0 + dt * f1, A, G
-
-
-def inv_small(a: FloatArray) -> FloatArray:
-    """Inverse of a symmetric positive definite 1 x 1, 2 x 2 or 3 x 3 matrix by cofactors
-    (numpy's general inverse costs ~20 us of call overhead at this size)."""
-    n = a.shape[0]
-    if n == 1:
-        return np.array([[1.0 / a[0, 0]]])
-    if n == 2:
-        det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-        two: FloatArray = np.array([[a[1, 1], -a[0, 1]], [-a[1, 0], a[0, 0]]]) / det
-        return two
-    if n == 3:
-        c = np.empty((3, 3))
-        c[0, 0] = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
-        c[0, 1] = a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]
-        c[0, 2] = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
-        c[1, 0] = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
-        c[1, 1] = a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]
-        c[1, 2] = a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]
-        c[2, 0] = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
-        c[2, 1] = a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
-        c[2, 2] = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-        det = a[0, 0] * c[0, 0] + a[0, 1] * c[1, 0] + a[0, 2] * c[2, 0]
-        out: FloatArray = c / det
-        return out
-    return np.asarray(np.linalg.inv(a), dtype=np.float64)
-
-
-def step_model(plant: LinearPlant | SurfaceVessel) -> StepModel:
-    """The filter's view of a plant model."""
-    if isinstance(plant, LinearPlant):
-        return LinearStep(plant)
-    return VesselStep(plant)
+# Re-exported: callers import the step models from here too.
+__all__ = [
+    "FilterOutput",
+    "KalmanEstimator",
+    "LinearStep",
+    "StepModel",
+    "VesselStep",
+    "inv_small",
+    "step_model",
+]
 
 
 @dataclass(frozen=True)

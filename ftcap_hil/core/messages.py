@@ -29,7 +29,9 @@ BoolArray = npt.NDArray[np.bool_]
 IntArray = npt.NDArray[np.intp]
 
 
-def _finite_vector(name: str, value: object, length: int | None = None) -> FloatArray:
+def finite_vector(name: str, value: object, length: int | None = None) -> FloatArray:
+    """``value`` as a 1-D float64 array (of ``length`` if given) with finite entries, else
+    MalformedMessage naming ``name``; what cannot be converted raises numpy's own error."""
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim != 1 or (length is not None and arr.shape[0] != length):
         raise MalformedMessage(
@@ -49,7 +51,7 @@ class WrenchSetpoint:
     @classmethod
     def checked(cls, tau: object) -> WrenchSetpoint:
         """Validate ``tau`` (3 finite numbers) or raise MalformedMessage."""
-        return cls(_finite_vector("wrench", tau, 3))
+        return cls(finite_vector("wrench", tau, 3))
 
 
 @dataclass(frozen=True)
@@ -63,7 +65,7 @@ class Odometry:
     @classmethod
     def checked(cls, eta: object, nu: object, time_s: float = math.nan) -> Odometry:
         """Validate ``eta`` and ``nu`` (3 finite numbers each) or raise MalformedMessage."""
-        return cls(_finite_vector("eta", eta, 3), _finite_vector("nu", nu, 3), float(time_s))
+        return cls(finite_vector("eta", eta, 3), finite_vector("nu", nu, 3), float(time_s))
 
 
 @dataclass(frozen=True)
@@ -75,7 +77,7 @@ class ThrusterCommand:
     @classmethod
     def checked(cls, u: object, m: int | None = None) -> ThrusterCommand:
         """Validate ``u`` (finite, length ``m`` if given) or raise MalformedMessage."""
-        return cls(_finite_vector("thruster command", u, m))
+        return cls(finite_vector("thruster command", u, m))
 
 
 class FaultKind(enum.Enum):

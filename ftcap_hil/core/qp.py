@@ -9,8 +9,8 @@ A failed solve is data (``BoxQpSolution.found = False``), never an exception. Ba
   from the previous result. proxsuite 0.8 segfaults when ``initial_guess`` is changed after
   ``init()`` or when ``update()`` precedes the first ``solve()``: the option is set before
   ``init()`` and the first problem is solved immediately.
-* ``daqp``: the dual active-set solver through its C entry point (no persistent object in
-  its Python API, but a call is cheap).
+* ``daqp`` (the default, ``AllocatorConfig.backend``): the dual active-set solver through its
+  C entry point (no persistent object in its Python API, but a call is cheap).
 * ``qpsolvers:<name>``: a one-shot ``qpsolvers.solve_qp`` per call. Slower (it rebuilds the
   problem each time); used as the cross-check in tests and as the benchmark baseline.
 """

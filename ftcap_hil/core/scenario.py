@@ -5,7 +5,9 @@ The type only; ``ftcap_hil.config.scenario`` reads it from TOML (docs/scenarios.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -16,6 +18,7 @@ from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.status import Mode
+from ftcap_hil.core.vessel3dof import Vessel3DOF
 
 
 @dataclass(frozen=True)
@@ -38,7 +41,7 @@ class Scenario:
 
     name: str
     description: str
-    plant: LinearPlant | SurfaceVessel
+    plant: LinearPlant | SurfaceVessel | Vessel3DOF
     thrusters: ThrusterSet
     B: FloatArray  # (k, m)
     dt_s: float
@@ -53,6 +56,11 @@ class Scenario:
     noise_std: FloatArray = field(default_factory=lambda: np.zeros(0))
     seed: int = 0
     time_unit: str = "s"  # "step" for the discrete linear plant
+    # The vessel's truth when it is not the allocator's plant: a sim.truth.TruthConfig
+    # (realistic scenarios, config/realistic.py); None: the paper's world, where the truth
+    # is ``plant`` itself integrated by ``integrator``.
+    truth: Any = None
+    length_m: float = math.nan  # the vessel's length overall (m), NaN: not stated
 
     @property
     def steps(self) -> int:

@@ -1,0 +1,225 @@
+"""Scenarios on a realistic vessel preset: the truth is the preset, the allocator is told the
+preset with a stated mismatch (docs/scenarios.md, "Realistic scenarios").
+
+A realistic scenario is a scenario file whose ``[plant]`` names a preset
+(``ftcap_hil/data/vessels``)::
+
+    [plant]
+    kind = "preset"
+    preset = "cybership2"          # shipped name or a path
+    inversion = "trapezoid"        # how the allocator inverts a step (its truth is continuous)
+    substeps = 4                   # RK4 substeps of the truth per step
+
+    [conditions]                   # which of the preset's realism acts (all true by default)
+    environment = true             # current, wind, waves at the preset's levels
+    sensors = true                 # position, heading, velocity noise at the preset's levels
+    thruster_lag = true            # the preset's first-order time constants
+    quantization = true            # the 14-bit command path
+    reverse_gain = 1.0             # reverse thrust per commanded N (1: as the allocator assumes)
+    deadband_rel = 0.0             # dead band, fraction of each thruster's range
+
+    [mismatch]                     # the allocator's model against the truth (the preset's own
+    mass = 0.2                     # [mismatch] when absent): fractions, degrees, metres
+    damping = -0.3
+    angle_deg = { port_rudder = 5.0 }
+
+    [sensor]                       # beyond the preset's noise levels
+    bias_rel = 0.0                 # slowly drifting bias, std as a fraction of the noise std
+    bias_tau_s = 60.0
+    delay_s = 0.0
+    dropout_p = 0.0
+
+    [controller]                   # eq. (24) sized to the allocator's inertia
+    period_s = 12.0                # natural period of each axis (s)
+    damping = 0.9
+
+The other tables ([scenario], [[reference]], [[fault]], [estimator], [allocator],
+[excitation]) are those of every scenario file. The estimator is told the preset's sensor
+levels (``measurement_std``) unless the file states them.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from ftcap_hil.config.presets import AllocatorModel, VesselPreset, apply_mismatch, load_preset
+from ftcap_hil.config.tables import Table
+from ftcap_hil.config.toml import TomlFile
+from ftcap_hil.core.controllers import PoseController
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.geometry import ThrusterSet
+from ftcap_hil.core.scenario import Scenario
+from sim.sensors import SensorConfig
+from sim.thrusters import ThrusterBankConfig
+from sim.truth import TruthConfig
+
+OWN_TABLES = ("plant", "conditions", "mismatch", "sensor", "controller")
+
+
+def is_realistic(data: dict[str, Any]) -> bool:
+    """Whether a scenario document names a vessel preset."""
+    plant = data.get("plant")
+    return isinstance(plant, dict) and plant.get("kind") == "preset"
+
+
+def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
+    """The scenario of a realistic scenario document (module docstring)."""
+    from ftcap_hil.config.scenario import parse_scenario
+
+    root = Table(data, where)
+    for name in OWN_TABLES:
+        root.allow(name)
+    seed = _seed(data, where)
+    plant_t = root.table("plant", required=True)
+    plant_t.allow("kind")
+    preset = load_preset(plant_t.string("preset"), seed=seed)
+    inversion = plant_t.choice("inversion", ("euler", "trapezoid"), "trapezoid")
+    substeps = plant_t.integer("substeps", 4, lo=1)
+    plant_t.finish()
+    told = _allocator_model(preset, root.table("mismatch"), inversion)
+    sc = parse_scenario(_common_tables(data, told.thrusters), where)
+    controller = _controller(root.table("controller"), np.diag(told.vessel.mass_matrix))
+    truth, sensor = _truth(preset, root, seed, substeps, sc.dt_s)
+    core = sc.core
+    if core.estimator.measurement_std is None and sensor is not None:
+        std = tuple(float(v) for v in sensor.noise_std[3:6])
+        core = dataclasses.replace(
+            core, estimator=dataclasses.replace(core.estimator, measurement_std=std)
+        )
+    return dataclasses.replace(
+        sc,
+        plant=told.vessel,
+        controller=controller,
+        core=core,
+        integrator="rk4",
+        rk4_substeps=substeps,
+        truth=truth,
+        length_m=preset.hull.l_oa_m,
+    )
+
+
+def _seed(data: dict[str, Any], where: str) -> int:
+    seed = data.get("scenario", {}).get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"{where}: [scenario] seed: expected an integer >= 0, got {seed!r}")
+    return seed
+
+
+def _allocator_model(preset: VesselPreset, mm: Table, inversion: str) -> AllocatorModel:
+    """The allocator's model: the preset with the file's mismatch (else the preset's own)."""
+    kwargs: dict[str, Any] = {}
+    if mm.has("mass"):
+        kwargs["mass"] = mm.number("mass", lo=-0.9)
+    if mm.has("damping"):
+        kwargs["damping"] = mm.number("damping", lo=-1.0)
+    angles = mm.value("angle_deg", None)
+    positions = mm.value("position_m", None)
+    mm.finish()
+    if angles is not None:
+        if not isinstance(angles, dict):
+            raise mm.error("angle_deg", f"expected a table of thruster = degrees, got {angles!r}")
+        kwargs["angle_deg"] = angles
+    if positions is not None:
+        if not isinstance(positions, dict):
+            raise mm.error(
+                "position_m", f"expected a table of thruster = [dx, dy], got {positions!r}"
+            )
+        kwargs["position_m"] = {k: tuple(v) for k, v in positions.items()}
+    told = apply_mismatch(preset, **kwargs)
+    vessel = dataclasses.replace(told.vessel, inversion=inversion)
+    return dataclasses.replace(told, vessel=vessel)
+
+
+def _common_tables(data: dict[str, Any], thrusters: ThrusterSet) -> dict[str, Any]:
+    """The document with the preset's tables replaced by a plain vessel the common scenario
+    loader reads (its thrusters are the allocator's; its plant is replaced afterwards)."""
+    out = {k: copy.deepcopy(v) for k, v in data.items() if k not in OWN_TABLES}
+    out["plant"] = {"kind": "vessel", "mass_kg": 1.0, "iz_kgm2": 1.0}
+    out["vessel"] = {
+        "thruster": [
+            {
+                "name": t.name, "x": t.x_m, "y": t.y_m, "angle_deg": math.degrees(t.angle_rad),
+                "u_min": t.u_min, "u_max": t.u_max,
+                **({"rate_max": t.rate_max} if t.rate_max is not None else {}),
+                **({"step_max": t.step_max} if t.step_max is not None else {}),
+            }
+            for t in thrusters.thrusters
+        ]
+    }  # fmt: skip
+    out["controller"] = {}
+    return out
+
+
+def _controller(t: Table, inertia: np.ndarray) -> PoseController:
+    period = t.number("period_s", 12.0, positive=True)
+    damping = t.number("damping", 0.9, positive=True)
+    t.finish()
+    return PoseController.for_vessel(inertia, period, damping)
+
+
+def _truth(
+    preset: VesselPreset, root: Table, seed: int, substeps: int, dt_s: float
+) -> tuple[TruthConfig, SensorConfig | None]:
+    cond = root.table("conditions")
+    env_on = cond.boolean("environment", True)
+    sensors_on = cond.boolean("sensors", True)
+    lag_on = cond.boolean("thruster_lag", True)
+    quant_on = cond.boolean("quantization", True)
+    reverse = cond.number("reverse_gain", 1.0, positive=True)
+    deadband = cond.number("deadband_rel", 0.0, lo=0.0, hi=0.5)
+    cond.finish()
+    ths = preset.thrusters
+    u_abs = np.maximum(np.abs(ths.u_min), np.abs(ths.u_max))
+    bank = ThrusterBankConfig.create(
+        ths.m,
+        time_constant_s=preset.time_constants_s.tolist() if lag_on else 0.0,
+        reverse_gain=reverse,
+        deadband_n=(deadband * u_abs).tolist(),
+        u_max_abs=u_abs.tolist() if quant_on else None,
+    )
+    seeds = np.random.SeedSequence(seed).spawn(2)
+    sensor = _sensor(preset, root.table("sensor"), int(seeds[1].generate_state(1)[0]), dt_s)
+    env = dataclasses.replace(preset.environment, seed=int(seeds[0].generate_state(1)[0]))
+    truth = TruthConfig(
+        vessel=preset.vessel,
+        B=preset.B,
+        bank=bank,
+        hull=preset.hull,
+        environment=env if env_on else None,
+        sensor=sensor if sensors_on else None,
+        substeps=substeps,
+        seed=int(seeds[0].generate_state(1)[0]),
+    )
+    return truth, truth.sensor
+
+
+def _sensor(preset: VesselPreset, t: Table, seed: int, dt_s: float) -> SensorConfig:
+    s = preset.sensors
+    noise = np.array(
+        [s.position_std_m, s.position_std_m, s.heading_std_rad,
+         s.velocity_std_m_s, s.velocity_std_m_s, s.yaw_rate_std_rad_s]
+    )  # fmt: skip
+    bias_rel = t.number("bias_rel", 0.0, lo=0.0)
+    bias_tau = t.number("bias_tau_s", 60.0, positive=True)
+    delay = t.number("delay_s", 0.0, lo=0.0)
+    dropout = t.number("dropout_p", 0.0, lo=0.0, hi=1.0)
+    t.finish()
+    return SensorConfig(
+        noise_std=noise,
+        bias_std=bias_rel * noise,
+        bias_tau_s=np.full(6, bias_tau),
+        rate_hz=1.0 / dt_s,
+        delay_s=delay,
+        dropout_p=dropout,
+        seed=seed,
+    )
+
+
+def realistic_document(doc: TomlFile) -> bool:
+    """Whether a parsed file is a realistic scenario (for loaders that dispatch on it)."""
+    return is_realistic(doc.data)

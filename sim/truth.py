@@ -1,0 +1,123 @@
+"""The vessel's truth: dynamics, environment, thrusters and sensor in one pure model.
+
+One model, two shells: the offline simulator (``ftcap_hil.runtime.offline``) and the
+simulated vessel process both step a :class:`TruthModel`. It is separate from what the
+allocator is told (its own plant and thruster geometry): a scenario states both, or a
+mismatch on top of a preset. Per step of ``dt_s`` with the commands ``u`` (m,) N held::
+
+    environment at the step's start  -> current (NED), wind + wave wrench (body)
+    thruster bank (lag, asymmetry, dead band, int14, faults)  -> produced forces F (m,)
+    tau = B_true F_mean                 the wrench the thrusters really produce
+    x <- vessel.step_rk4(x, tau, dt, current, tau_env)       x = [north, east, psi, u, v, r]
+    sensor(t, x)  -> odometry samples delivered by now (noise, bias, rate, delay, dropouts)
+
+Pure: no I/O, no clock; every random stream comes from the configured seeds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ftcap_hil.core.faults import Truth
+from ftcap_hil.core.messages import FloatArray
+from ftcap_hil.core.vessel3dof import Vessel3DOF
+from sim.environment import Environment, EnvironmentConfig, HullGeometry
+from sim.sensors import Measurement, OdometrySensor, SensorConfig
+from sim.thrusters import BankOutput, ThrusterBank, ThrusterBankConfig
+
+
+@dataclass(frozen=True)
+class TruthConfig:
+    """What the vessel really is (module docstring). ``B`` (3, m): the true effectiveness
+    of the true thruster geometry; ``environment`` None: calm; ``sensor`` None: the exact
+    state at every step; ``substeps``: RK4 substeps per step."""
+
+    vessel: Vessel3DOF
+    B: FloatArray
+    bank: ThrusterBankConfig
+    hull: HullGeometry | None = None
+    environment: EnvironmentConfig | None = None
+    sensor: SensorConfig | None = None
+    substeps: int = 4
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.B.shape != (3, self.bank.m):
+            raise ValueError(f"truth: B has shape {self.B.shape}, the bank {self.bank.m} thrusters")
+        if self.environment is not None and self.hull is None:
+            raise ValueError("truth: an environment needs the hull geometry")
+        if self.substeps < 1:
+            raise ValueError(f"truth.substeps: expected >= 1, got {self.substeps}")
+
+
+@dataclass(frozen=True)
+class TruthStep:
+    """What one step did: the state at its end (t_s), the forces and the wrench that acted
+    (means over the step), the environment at its start, the thruster bank's output."""
+
+    t_s: float
+    x: FloatArray
+    produced: FloatArray
+    tau: FloatArray
+    current_ned: FloatArray
+    tau_env: FloatArray
+    bank: BankOutput
+    measurements: list[Measurement] = field(default_factory=list)
+
+
+class TruthModel:
+    """See the module docstring. ``x0``: [north, east, psi, u, v, r]."""
+
+    def __init__(self, config: TruthConfig, x0: FloatArray, t0_s: float = 0.0) -> None:
+        self.config = config
+        self._x = np.array(x0, dtype=np.float64)
+        self._t = float(t0_s)
+        self._bank = ThrusterBank(config.bank)
+        env = config.environment
+        self._env = None
+        if env is not None and config.hull is not None:
+            environment = Environment(env, config.hull, seed=config.seed)
+            self._env = None if environment.calm else environment
+        self._sensor = None if config.sensor is None else OdometrySensor(config.sensor)
+
+    @property
+    def t_s(self) -> float:
+        return self._t
+
+    @property
+    def x(self) -> FloatArray:
+        return self._x.copy()
+
+    @property
+    def shaft_thrust(self) -> FloatArray:
+        """(m,) what each healthy shaft would give now (for a stuck thruster's held force)."""
+        return self._bank.shaft_thrust
+
+    def step(self, u: FloatArray, truth: Truth, dt_s: float) -> TruthStep:
+        """Advance ``dt_s`` with commands ``u`` (m,) N and the faults ``truth`` held."""
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise ValueError(f"dt_s: expected a finite positive step, got {dt_s}")
+        cfg = self.config
+        current, tau_env = np.zeros(2), np.zeros(3)
+        if self._env is not None:
+            sample = self._env.sample(self._t, self._x)
+            current, tau_env = sample.current_ned, sample.tau_env
+        out = self._bank.step(u, truth, dt_s)
+        tau = cfg.B @ out.produced_mean
+        cur = current if self._env is not None else None
+        env = tau_env if self._env is not None else None
+        # psi stays continuous (the records' convention); a shell that publishes wraps it
+        self._x = cfg.vessel.step_rk4(self._x, tau, dt_s, cfg.substeps, cur, env)
+        self._t += dt_s
+        measured = self._measure()
+        return TruthStep(
+            self._t, self._x.copy(), out.produced_mean, tau, current, tau_env, out, measured
+        )
+
+    def _measure(self) -> list[Measurement]:
+        if self._sensor is None:
+            return [Measurement(self._t, self._t, self._x[:3].copy(), self._x[3:].copy())]
+        return self._sensor.step(self._t, self._x)

@@ -133,8 +133,21 @@ class Table:
         if key in self.data:
             return self.data[key]
         if default is MISSING:
-            raise self.error(key, "missing")
+            raise self.error(key, f"missing{self._typo_of(key)}")
         return default
+
+    def _typo_of(self, key: str) -> str:
+        """`` ('kye' is given: a typo?)`` for a given, unread key very close to ``key``."""
+        unread = [k for k in self.data if k not in self._known]
+        close = difflib.get_close_matches(key, unread, n=1, cutoff=0.8)
+        return f" ({close[0]!r} is given: a typo?)" if close else ""
+
+    def _missing_table(self, key: str, array: bool) -> ConfigError:
+        self._known.add(key)
+        name = f"{self.name}.{key}" if self.name else key
+        table = f"[[{name}]]" if array else f"[{name}]"
+        within = f" in {self.label}" if self.index is not None else ""
+        return ConfigError(f"{self.file}: {table} missing{within}{self._typo_of(key)}")
 
     def renamed(self, old: str, new: str) -> None:
         """Refuse ``old``, a key (or, at the top of a file, a table) now called ``new``."""
@@ -315,14 +328,18 @@ class Table:
 
     def table(self, key: str, required: bool = False) -> Table:
         """The sub-table ``[key]`` (an empty one if absent and not required)."""
-        v = self.value(key, MISSING if required else {})
+        if required and key not in self.data:
+            raise self._missing_table(key, array=False)
+        v = self.value(key, {})
         if not isinstance(v, dict):
             raise self._bad(key, "a table", v)
         return self._child(key, v)
 
     def tables(self, key: str, required: bool = False) -> list[Table]:
         """The array of tables ``[[key]]`` (empty if absent and not required)."""
-        v = self.value(key, MISSING if required else [])
+        if required and key not in self.data:
+            raise self._missing_table(key, array=True)
+        v = self.value(key, [])
         if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
             raise self._bad(key, f"an array of tables [[{key}]]", v)
         if required and not v:

@@ -21,13 +21,10 @@ unknown key the nearest valid key (difflib) and the valid keys::
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import enum
 import math
-import types
-import typing
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, Self, TypeVar, overload
 
 import numpy as np
@@ -354,43 +351,11 @@ class Table:
         exclude: Iterable[str] = (),
         defaults: Mapping[str, Any] | None = None,
     ) -> D:
-        """``cls`` built from this table: one key per dataclass field (minus ``exclude``),
-        each read by the getter its annotation calls for (float, int, bool, str, an Enum,
-        ``tuple[float, ...]``, any of them ``| None``); ``choices`` restrict string fields;
-        ``defaults`` replace the dataclass's own defaults. A ValueError of ``cls`` becomes a
-        ConfigError here."""
-        hints = typing.get_type_hints(cls)
-        skip = set(exclude)
-        given: dict[str, Any] = dict(defaults or {})
-        for f in dataclasses.fields(cls):  # type: ignore[arg-type]
-            if f.name in skip or not f.init:
-                continue
-            self._known.add(f.name)
-            if f.name in self.data:
-                given[f.name] = self._typed(f.name, hints[f.name], (choices or {}).get(f.name))
-        try:
-            return cls(**given)
-        except (TypeError, ValueError) as e:
-            raise self.error(None, str(e)) from e
+        """``cls`` built from this table, a key per field read by its annotation's type
+        (:func:`ftcap_hil.config.table_dataclass.read_dataclass`)."""
+        from ftcap_hil.config.table_dataclass import read_dataclass
 
-    def _typed(self, key: str, hint: Any, choices: Sequence[str] | None) -> Any:
-        if types.NoneType in typing.get_args(hint):  # ``X | None``: read as X
-            hint = next(a for a in typing.get_args(hint) if a is not types.NoneType)
-        if choices is not None:
-            return self.choice(key, choices)
-        if isinstance(hint, type) and issubclass(hint, enum.Enum):
-            return self.enum(key, hint)
-        if typing.get_origin(hint) is tuple and typing.get_args(hint) == (float, ...):
-            return tuple(float(x) for x in self.vector(key))
-        getter: dict[Any, Callable[[str], Any]] = {
-            float: self.number,
-            int: self.integer,
-            bool: self.boolean,
-            str: self.string,
-        }
-        if hint not in getter:
-            raise TypeError(f"Table.dataclass: no getter for {key}: {hint}")
-        return getter[hint](key)
+        return read_dataclass(self, cls, choices or {}, set(exclude), defaults or {})
 
     # ----------------------------------------------------------------- the end
 

@@ -45,7 +45,7 @@ def daemon_config_from(root: Table) -> DaemonConfig:
         thrusters=ths,
         B=B,
         plant=plant,
-        core=core_config_from(root, mode),
+        core=core_config_from(root, mode, B.shape[0]),
         rate_hz=d.number("rate_hz", 1.0 / 0.2827, positive=True),
         estimation_period_s=d.number("estimation_period_s", 0.2827, positive=True),
         setpoint_timeout_s=d.number("setpoint_timeout_s", 1.0, positive=True),

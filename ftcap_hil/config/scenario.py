@@ -30,15 +30,19 @@ INTEGRATORS = ("euler", "rk4")
 REPLACEABLE = ("controller", "reference", "fault")  # tables a mission may give instead
 
 
-def core_config_from(root: Table, mode: Mode, evict_straddling: bool = True) -> CoreConfig:
+def core_config_from(root: Table, mode: Mode, k: int, evict_straddling: bool = True) -> CoreConfig:
     """``[estimator]``, ``[allocator]``, ``[excitation]``: the core's tunables (every key of
-    EstimatorConfig, AllocatorConfig, ExcitationConfig; the backend among those installed)."""
+    EstimatorConfig, AllocatorConfig, ExcitationConfig; the backend among those installed;
+    ``measurement_std`` one value per dynamic state, k of them)."""
     root.renamed("allocation", "allocator")
+    est_t = root.table("estimator")
+    estimator = est_t.dataclass(EstimatorConfig, defaults={"evict_straddling": evict_straddling})
+    std = estimator.measurement_std
+    if std is not None and (len(std) != k or min(std) < 0.0):
+        raise est_t.error("measurement_std", f"expected {k} numbers >= 0, got {list(std)}")
     return CoreConfig(
         mode=mode,
-        estimator=root.table("estimator").dataclass(
-            EstimatorConfig, defaults={"evict_straddling": evict_straddling}
-        ),
+        estimator=estimator,
         allocator=root.table("allocator").dataclass(
             AllocatorConfig, choices={"backend": available_backends()}
         ),
@@ -69,7 +73,7 @@ def scenario_from(root: Table, mission: Table | None = None) -> Scenario:
     )
     mode = head.enum("mode", Mode, Mode.FTCAP)
     # a discrete-time plant has no sample straddling an onset (faults act per step)
-    core = core_config_from(root, mode, evict_straddling=not linear)
+    core = core_config_from(root, mode, ref_len, evict_straddling=not linear)
     noise = root.table("noise").vector("state_std", x_len, [0.0] * x_len, lo=0.0)
     return Scenario(
         name=head.string("name", root.file),

@@ -61,6 +61,11 @@ def test_scenario_fault_untill_is_refused(tmp_path: Path) -> None:
         ("[plant]", "[noise]\nstd = 0.1\n[plant]", "[noise] unknown key 'std'"),
         ("[plant]", "[noize]\n[plant]", "unknown table 'noize' (did you mean 'noise'?)"),
         ("[plant]", "[allocation]\n[plant]", "table [allocation] is now called [allocator]"),
+        (
+            "[plant]",
+            "[estimator]\nmeasurement_std = [0.001, 0.001]\n[plant]",
+            "[estimator] measurement_std: expected 3 numbers >= 0, got [0.001, 0.001]",
+        ),
     ],
 )
 def test_scenario_tables_refuse_unknown_keys(tmp_path: Path, old: str, new: str, message: str):

@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.config.realistic import is_realistic, parse_realistic
 from ftcap_hil.config.scenario import REPLACEABLE, SHIPPED, scenario_from
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import TomlFile, read_toml, shipped_names
@@ -105,8 +106,12 @@ def mission_from(root: Table, base: Path | None = None) -> Mission:
     head = root.table("mission", required=True)
     root.allow(*REPLACEABLE)
     sc_doc = _scenario_doc(head, base)
-    with Table.document(sc_doc) as sc_root:
-        sc = scenario_from(sc_root, root)
+    if is_realistic(sc_doc.data):  # its own reader: the mission's tables merged in
+        merged = {**sc_doc.data, **{k: root.data[k] for k in REPLACEABLE if root.has(k)}}
+        sc = parse_realistic(merged, f"{root.file} (scenario {sc_doc.source})")
+    else:
+        with Table.document(sc_doc) as sc_root:
+            sc = scenario_from(sc_root, root)
     if sc.time_unit != "s":
         raise head.error("scenario", f"{sc_doc.source!r} is not a vessel scenario")
     name = head.string("name", sc.name)

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ftcap_hil.config.fault_keys import fault_schedule_from
+from ftcap_hil.config.realistic import is_realistic, parse_realistic
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
 from ftcap_hil.config.vessel import plant_from
@@ -97,7 +98,10 @@ def scenario_from(root: Table, mission: Table | None = None) -> Scenario:
 
 
 def parse_scenario(data: Mapping[str, Any], file: str = "scenario") -> Scenario:
-    """A scenario from a parsed TOML document (``file`` names it in messages)."""
+    """A scenario from a parsed TOML document (``file`` names it in messages); one whose
+    ``[plant] kind = "preset"`` is a realistic scenario (``config/realistic.py``)."""
+    if is_realistic(dict(data)):
+        return parse_realistic(dict(data), file)
     with Table(data, file) as root:
         return scenario_from(root)
 

@@ -21,7 +21,7 @@ from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 
 PRESETS = ("paper-4.2",)
-PLANT_KINDS = ("linear", "vessel")
+PLANT_KINDS = ("linear", "vessel", "preset")
 INVERSIONS = ("euler", "trapezoid")
 
 
@@ -118,7 +118,10 @@ def plant_from(root: Table) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, F
     """``[plant]`` (+ ``[actuators]`` for the linear plant, ``[vessel]`` for the vessel) of a
     file: the plant model, its thrusters and B (k x m)."""
     plant_t = root.table("plant", required=True)
-    if plant_t.choice("kind", PLANT_KINDS) == "linear":
+    kind = plant_t.choice("kind", PLANT_KINDS)
+    if kind == "preset":  # dispatched before this reader: a scenario file's realistic form
+        raise plant_t.error("kind", "'preset' (a vessel preset) is for scenario files only")
+    if kind == "linear":
         return _linear(root, plant_t)
     vessel = plant_t.dataclass(
         SurfaceVessel, exclude=("k", "state_labels"), choices={"inversion": INVERSIONS}

@@ -40,8 +40,8 @@ import numpy as np
 
 from ftcap_hil.core.estimator import Estimate, EstimatorConfig
 from ftcap_hil.core.messages import BoolArray, FloatArray
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.step_models import LinearStep, StepModel, VesselStep, inv_small, step_model
+from ftcap_hil.core.vessel3dof import PlantModel
 
 # Re-exported: callers import the step models from here too.
 __all__ = [
@@ -74,7 +74,7 @@ class KalmanEstimator:
         self,
         B: FloatArray,
         scale: FloatArray,
-        plant: LinearPlant | SurfaceVessel,
+        plant: PlantModel,
         config: EstimatorConfig | None = None,
     ) -> None:
         self.config = cfg = config or EstimatorConfig()
@@ -162,8 +162,7 @@ class KalmanEstimator:
         self._evidence.append(self._last_evidence)
         alarm = self._change_detected(nis)
         if not alarm:
-            if self._since_alarm > m + k:
-                self._adapt(nis, dt_s)
+            self._adapt(nis, dt_s)
             self._correct(self.P[:, :k] @ S_inv, e)
             self._project()
             return self._output(nis, False, info)
@@ -237,12 +236,12 @@ class KalmanEstimator:
         """Scale the process noise so that the innovations have the size the filter expects
         (mean nis = k): smaller in a world the model matches, larger in a seaway or with a
         model error. A log-average, over the samples so far at first and then with the time
-        constant ``adapt_s``; each sample's ratio clipped to [0.1, 10], samples around a
+        constant ``adapt_s``; each sample's ratio clipped to [0.01, 100]; the sample of a
         change alarm left out."""
         cfg = self.config
         if cfg.adapt_s <= 0.0:
             return
-        ratio = min(max(nis / self._k, 0.1), 10.0)
+        ratio = min(max(nis / self._k, 0.01), 100.0)
         # 1/n at first (the scale settles within the first samples), then the time constant
         step = math.log(ratio) * min(1.0, max(dt_s / cfg.adapt_s, 1.0 / max(self.samples, 1)))
         self.q_scale = min(max(self.q_scale * math.exp(step), 1e-6), 1e6)

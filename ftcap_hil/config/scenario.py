@@ -34,13 +34,19 @@ REPLACEABLE = ("controller", "reference", "fault")  # tables a mission may give 
 def core_config_from(root: Table, mode: Mode, k: int, evict_straddling: bool = True) -> CoreConfig:
     """``[estimator]``, ``[allocator]``, ``[excitation]``: the core's tunables (every key of
     EstimatorConfig, AllocatorConfig, ExcitationConfig; the backend among those installed;
-    ``measurement_std`` one value per dynamic state, k of them)."""
+    ``measurement_std`` one value per dynamic state, k of them, or for a vessel 2 k: the
+    pose's and the velocities', and the filter tracks the pose too)."""
     root.renamed("allocation", "allocator")
     est_t = root.table("estimator")
     estimator = est_t.dataclass(EstimatorConfig, defaults={"evict_straddling": evict_straddling})
     std = estimator.measurement_std
-    if std is not None and (len(std) != k or min(std) < 0.0):
-        raise est_t.error("measurement_std", f"expected {k} numbers >= 0, got {list(std)}")
+    sizes = (k, 2 * k) if k == 3 else (k,)
+    if std is not None and (len(std) not in sizes or min(std) < 0.0):
+        want = " or ".join(str(n) for n in sizes)
+        raise est_t.error("measurement_std", f"expected {want} numbers >= 0, got {list(std)}")
+    ws = estimator.wave_force_std
+    if ws is not None and (len(ws) != k or min(ws) <= 0.0):
+        raise est_t.error("wave_force_std", f"expected {k} numbers > 0, got {list(ws)}")
     return CoreConfig(
         mode=mode,
         estimator=estimator,

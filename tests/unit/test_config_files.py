@@ -64,7 +64,7 @@ def test_scenario_fault_untill_is_refused(tmp_path: Path) -> None:
         (
             "[plant]",
             "[estimator]\nmeasurement_std = [0.001, 0.001]\n[plant]",
-            "[estimator] measurement_std: expected 3 numbers >= 0, got [0.001, 0.001]",
+            "[estimator] measurement_std: expected 3 or 6 numbers >= 0, got [0.001, 0.001]",
         ),
     ],
 )

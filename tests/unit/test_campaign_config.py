@@ -62,7 +62,7 @@ def test_the_shipped_campaigns_parse_and_plan(tmp_path: Path) -> None:
         assert plan.tasks and files
     plan, _ = plan_campaign(load_campaign("realistic"), tmp_path)
     faulty = [t for t in plan.tasks if not t.healthy]
-    assert len(faulty) == 250  # 2 vessels x 5 kinds x 5 seeds x (none, cap, oracle, 2 ftcap)
+    assert len(faulty) == 375  # 3 scenarios x 5 kinds x 5 seeds x (none, cap, oracle, 2 ftcap)
 
 
 def _typo(table: str, key: str):  # noqa: ANN202

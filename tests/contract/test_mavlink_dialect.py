@@ -20,13 +20,30 @@ def _message_ids(xml: Path) -> dict[int, str]:
 
 def test_our_ids_are_in_our_range_and_free_in_every_bundled_dialect() -> None:
     ours = _message_ids(mavlink_dialect.XML)
-    assert set(ours.values()) == {"WRENCH_SETPOINT", "FTCAP_STATUS", "FTCAP_ESC_STATUS"}
-    assert all(i in mavlink_dialect.MESSAGE_IDS for i in ours)
+    standard = mavlink_dialect.STANDARD_IDS
+    own = {i: n for i, n in ours.items() if i not in standard}
+    assert set(own.values()) == {
+        "WRENCH_SETPOINT",
+        "FTCAP_STATUS",
+        "FTCAP_ESC_STATUS",
+        "FTCAP_THRUST",
+    }
+    assert all(i in mavlink_dialect.MESSAGE_IDS for i in own)
+    assert {i: ours[i] for i in standard} == standard
     bundled = sorted(mavlink_dialect.pymavlink_definitions_dir().glob("*.xml"))
     assert any(p.name == "all.xml" for p in bundled)
     for xml in bundled:
-        clash = set(ours) & set(_message_ids(xml))
+        clash = set(own) & set(_message_ids(xml))
         assert not clash, f"{xml.name} also uses message ids {sorted(clash)}"
+
+
+def test_standard_esc_messages_match_common_xml_on_the_wire() -> None:
+    # The CRC extra of MAVLink's own common.xml ESC_INFO / ESC_STATUS (251, 10): the same
+    # fields in the same order, so QGroundControl and MAVSDK decode ours.
+    assert DIALECT.MAVLINK_MSG_ID_ESC_INFO == 290
+    assert DIALECT.MAVLink_esc_info_message.crc_extra == 251
+    assert DIALECT.MAVLINK_MSG_ID_ESC_STATUS == 291
+    assert DIALECT.MAVLink_esc_status_message.crc_extra == 10
 
 
 def test_wire_format_is_pinned() -> None:
@@ -35,7 +52,9 @@ def test_wire_format_is_pinned() -> None:
     assert DIALECT.MAVLINK_MSG_ID_WRENCH_SETPOINT == 52800
     assert DIALECT.MAVLink_wrench_setpoint_message.crc_extra == 232
     assert DIALECT.MAVLINK_MSG_ID_FTCAP_STATUS == 52801
-    assert DIALECT.MAVLink_ftcap_status_message.crc_extra == 25
+    assert DIALECT.MAVLink_ftcap_status_message.crc_extra == 25  # extensions do not count
+    assert DIALECT.MAVLINK_MSG_ID_FTCAP_THRUST == 52803
+    assert DIALECT.MAVLink_ftcap_thrust_message.crc_extra == 196
     assert DIALECT.WIRE_PROTOCOL_VERSION == "2.0"
 
 

@@ -68,6 +68,7 @@ from bridges.mavlink.config import (
 from bridges.mavlink.esc import EscInfoClock, send_standard_esc
 from bridges.mavlink.link import MavlinkPort, PortOwner, Route
 from bridges.mavlink.params import ParamServer, ParamService, ParamSpec
+from bridges.mavlink.peers import TrafficLimits
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import Odometry, ThrusterCommand, WrenchSetpoint
 from ftcap_hil.core.status import AllocatorStatus
@@ -161,6 +162,7 @@ class MavlinkAllocatorLink(PortOwner):
         *,
         poll_s: float = 0.05,
         heartbeat_period_s: float = 1.0,
+        limits: TrafficLimits | None = None,
     ) -> None:
         self.config = config
         self.odometry: Mailbox[Odometry] = Mailbox("mavlink.odometry")
@@ -185,6 +187,7 @@ class MavlinkAllocatorLink(PortOwner):
             status=SystemStatus.BOOT,
             heartbeat_period_s=heartbeat_period_s,
             poll_s=poll_s,
+            limits=limits,
         )
         self._param_service.attach(self._port)
         self.commands.attach(self._port)

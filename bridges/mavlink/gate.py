@@ -39,8 +39,10 @@ _REASONS = ("mavlink1", "unsigned", "bad_signature", "replay", "unknown_system")
 class PortStats:
     """Counters of one port, written by its dispatch thread (``send_errors`` by senders)."""
 
+    datagrams: int = 0  # datagrams (or stream reads) the gate was handed
+    parsed: int = 0  # of those, the ones parsed (not rate-limited or oversized)
     received: int = 0  # frames accepted by the gate
-    bad_data: int = 0  # CRC errors, garbage bytes, incomplete frames
+    bad_data: int = 0  # CRC errors, garbage bytes, incomplete frames, empty datagrams
     oversized: int = 0
     mavlink1: int = 0
     unsigned: int = 0
@@ -49,7 +51,7 @@ class PortStats:
     unknown_system: int = 0
     unauthorized: int = 0  # setpoints / parameters / commands from a non-authorized system
     malformed: int = 0  # decoded but invalid, for handlers without a mailbox
-    ignored: int = 0  # addressed to someone else or from an unexpected source
+    ignored: int = 0  # addressed to someone else, from an unexpected source, or our own echo
     relayed: int = 0
     send_errors: int = 0
     errors: int = 0  # unexpected exceptions in handlers (logged)
@@ -57,6 +59,10 @@ class PortStats:
     def refused(self) -> int:
         """Frames the gate refused (MAVLink 1, signing, unknown systems)."""
         return sum(getattr(self, r) for r in _REASONS)
+
+    def frames_counted(self) -> int:
+        """Every outcome of a parsed datagram: accepted, refused, bad or our own echo."""
+        return self.received + self.bad_data + self.refused() + self.ignored
 
 
 class InboxGate:
@@ -88,12 +94,16 @@ class InboxGate:
     def process(self, data: bytes, addr: Address, now_ns: int) -> list[Any]:
         """The accepted messages of one datagram (or stream read) from ``addr``."""
         table = self._table
+        self._stats.datagrams += 1
         if not table.admit_datagram(addr, now_ns):
             return []
         if self._datagrams and len(data) > MAX_PARSED_DATAGRAM:
             self._stats.oversized += 1
             return []
+        self._stats.parsed += 1
         msgs = self._parse(data)
+        if not msgs and self._datagrams and not data:
+            self._stats.bad_data += 1  # an empty datagram: nothing else would count it
         table.charge_frames(addr, len(msgs) - 1)
         out = []
         signing_now = signing_timestamp(time.time()) if self._verifier is not None else 0
@@ -107,7 +117,8 @@ class InboxGate:
                 continue
             system = msg.get_srcSystem()
             if (system, msg.get_srcComponent()) == self._own:
-                continue  # our own traffic echoed back by a forwarder
+                self._stats.ignored += 1  # our own traffic echoed back by a forwarder
+                continue
             self._stats.received += 1
             table.accepted(addr, now_ns, reply=system in self._authorized)
             self._relay(msg, addr)
@@ -116,14 +127,23 @@ class InboxGate:
 
     def _parse(self, data: bytes) -> list[Any]:
         parser = self.parser
-        msgs: list[Any] = parser.parse_buffer(data) or []
+        try:
+            msgs: list[Any] = parser.parse_buffer(data) or []
+        except Exception:  # robust parsing should never raise; if it does, the input is bad
+            self._stats.bad_data += 1
+            self._reset_parser()
+            return []
         if self._datagrams and parser.buf_len() > 0:
             # A frame never spans datagrams: drop the incomplete tail, or a bogus length
             # field in garbage would swallow the next, valid datagram.
             self._stats.bad_data += 1
-            parser.buf, parser.buf_index = bytearray(), 0
-            parser.expected_length = self._dialect.HEADER_LEN_V1 + 2  # as in MAVLink.__init__
+            self._reset_parser()
         return msgs
+
+    def _reset_parser(self) -> None:
+        parser = self.parser
+        parser.buf, parser.buf_index = bytearray(), 0
+        parser.expected_length = self._dialect.HEADER_LEN_V1 + 2  # as in MAVLink.__init__
 
     def _refusal(self, msg: Any, signing_now: int) -> str:
         msgbuf = msg.get_msgbuf()

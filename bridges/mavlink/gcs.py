@@ -44,6 +44,7 @@ from bridges.mavlink.commands import MavResult
 from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint, default_gcs_endpoint
 from bridges.mavlink.link import MavlinkPort, PortOwner, Route
 from bridges.mavlink.params import int_from_wire, int_to_wire
+from bridges.mavlink.peers import TrafficLimits
 from bridges.mavlink.vessel import (
     FAILURE_TYPE_OF,
     FAILURE_UNIT_SYSTEM_MOTOR,
@@ -99,6 +100,7 @@ class MavlinkGcsLink(PortOwner):
         vessel_ids: Ids = VESSEL_IDS,
         poll_s: float = 0.05,
         heartbeat_period_s: float = 1.0,
+        limits: TrafficLimits | None = None,
     ) -> None:
         self.allocator_ids = allocator_ids
         self.vessel_ids = vessel_ids
@@ -131,6 +133,7 @@ class MavlinkGcsLink(PortOwner):
             default_authorized=(allocator_ids[0], vessel_ids[0]),
             heartbeat_period_s=heartbeat_period_s,
             poll_s=poll_s,
+            limits=limits,
         )
 
     # --- dispatch thread ---

@@ -60,6 +60,7 @@ from bridges.mavlink.config import MavlinkEndpoint, default_vessel_endpoint
 from bridges.mavlink.geodesy import GeodeticOrigin
 from bridges.mavlink.link import MavlinkPort, PortOwner
 from bridges.mavlink.params import ParamServer, ParamService, ParamSpec, ParamType
+from bridges.mavlink.peers import TrafficLimits
 from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry
 from ftcap_hil.ports.mailbox import EventQueue, Stamped
 
@@ -147,6 +148,7 @@ class MavlinkVesselLink(PortOwner):
         fault_queue_size: int = 64,
         poll_s: float = 0.05,
         heartbeat_period_s: float = 1.0,
+        limits: TrafficLimits | None = None,
     ) -> None:
         if not isinstance(n_thrusters, int) or n_thrusters < 1:
             raise ValueError(f"n_thrusters: expected a positive integer, got {n_thrusters!r}")
@@ -169,6 +171,7 @@ class MavlinkVesselLink(PortOwner):
             routes=routes,
             heartbeat_period_s=heartbeat_period_s,
             poll_s=poll_s,
+            limits=limits,
         )
         self._param_service.attach(self._port)
         self.commands.attach(self._port)

@@ -105,7 +105,9 @@ class MavlinkEndpoint:
     must leave ``peers`` and ``relay`` empty. ``peers`` and ``relay`` are ``host:port``
     inboxes (module docstring). ``key_file``: MAVLink 2 signing passphrase file (None: no
     signing). ``authorized_systems``: system ids obeyed (None: the link's default).
-    ``bind_all_interfaces`` must be true for a bind on 0.0.0.0 or ::.
+    ``bind_all_interfaces`` must be true for a bind on 0.0.0.0 or ::. ``geodetic_origin``:
+    ``(lat_deg, lon_deg[, alt_m])`` of the NED origin, for the vessel's GLOBAL_POSITION_INT
+    (:mod:`bridges.mavlink.geodesy`; other links ignore it).
     """
 
     connection: str
@@ -116,6 +118,7 @@ class MavlinkEndpoint:
     key_file: str | None = None
     authorized_systems: tuple[int, ...] | None = None
     bind_all_interfaces: bool = False
+    geodetic_origin: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         for key, value in (("system_id", self.system_id), ("component_id", self.component_id)):
@@ -142,6 +145,10 @@ class MavlinkEndpoint:
             raise LinkConfigError(
                 f"bind_all_interfaces: expected true or false, got {self.bind_all_interfaces!r}"
             )
+        if self.geodetic_origin is not None:
+            from bridges.mavlink.geodesy import GeodeticOrigin  # it imports LinkConfigError
+
+            GeodeticOrigin.from_value(self.geodetic_origin)
         if bind_host(self.connection) in _ALL_INTERFACES and not self.bind_all_interfaces:
             raise LinkConfigError(
                 f"connection: {self.connection!r} listens on all interfaces; bind a single "
@@ -161,6 +168,8 @@ class MavlinkEndpoint:
             if isinstance(merged[key], str) or not isinstance(merged[key], Sequence):
                 raise LinkConfigError(f"{section}.{key}: expected a list of 'host:port'")
             merged[key] = tuple(merged[key])
+        if isinstance(merged["geodetic_origin"], list):
+            merged["geodetic_origin"] = tuple(merged["geodetic_origin"])
         if merged["authorized_systems"] is not None:
             try:
                 merged["authorized_systems"] = _ids(

@@ -135,7 +135,8 @@ class MavlinkVesselLink(PortOwner):
 
     ``faults``: queue of ``Stamped[FaultInjection]``, drained by the sim loop
     (:meth:`drain_faults`). ``params``: SYS_FAILURE_EN plus ``extra_params``.
-    ``geodetic_origin``: where NED (0, 0) is on the Earth (None: no GLOBAL_POSITION_INT).
+    ``geodetic_origin``: where NED (0, 0) is on the Earth (default: the endpoint's
+    ``geodetic_origin``; None: no GLOBAL_POSITION_INT).
     """
 
     def __init__(
@@ -153,7 +154,10 @@ class MavlinkVesselLink(PortOwner):
         if not isinstance(n_thrusters, int) or n_thrusters < 1:
             raise ValueError(f"n_thrusters: expected a positive integer, got {n_thrusters!r}")
         self.n_thrusters = n_thrusters
-        self.geodetic_origin = geodetic_origin
+        endpoint = endpoint or default_vessel_endpoint()
+        self.geodetic_origin = geodetic_origin or GeodeticOrigin.from_value(
+            endpoint.geodetic_origin
+        )
         self.faults: EventQueue[FaultInjection] = EventQueue("mavlink.fault", fault_queue_size)
         enable = ParamSpec(
             FAILURE_ENABLE_PARAM, 0, ParamType.INT, 0, 1, description="allow fault injection"
@@ -163,7 +167,7 @@ class MavlinkVesselLink(PortOwner):
         self.commands = CommandService({MAV_CMD_INJECT_FAILURE: self._on_inject})
         routes = {**self.commands.routes(), **self._param_service.routes()}
         self._port = MavlinkPort(
-            endpoint or default_vessel_endpoint(),
+            endpoint,
             role="vessel",
             mav_type="MAV_TYPE_SURFACE_BOAT",
             autopilot="MAV_AUTOPILOT_GENERIC",

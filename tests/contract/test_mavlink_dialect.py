@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import importlib.util
 import re
+import struct
+import subprocess
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -112,3 +115,77 @@ def test_mavgen_failure_is_reported(tmp_path) -> None:
     broken.write_text(mavlink_dialect.XML.read_text().replace('id="52801"', 'id="52800"'))
     with pytest.raises(RuntimeError, match="mavgen failed"):
         mavlink_dialect.render(broken)
+
+
+def _fresh_load(xml: Path) -> Path:
+    """Load ``xml`` as a dialect of its own (not the cached module) and return its file."""
+    before = set(sys.modules)
+    try:
+        return Path(str(mavlink_dialect.load(xml).__file__))
+    finally:
+        for name in set(sys.modules) - before:
+            del sys.modules[name]
+
+
+def _copy_xml(tmp_path: Path) -> Path:
+    xml = tmp_path / "ftcap.xml"
+    xml.write_text(mavlink_dialect.XML.read_text().replace("Cycle state.", "Cycle state (t)."))
+    return xml
+
+
+def test_a_new_cache_directory_is_private(tmp_path, monkeypatch) -> None:
+    cache = tmp_path / "cache" / "mavlink"
+    monkeypatch.setenv("FTCAP_MAVLINK_CACHE", str(cache))
+    path = _fresh_load(_copy_xml(tmp_path))
+    assert path.parent == cache
+    assert cache.stat().st_mode & 0o777 == 0o700
+    assert path.stat().st_mode & 0o077 == 0  # the module is not even readable by others
+
+
+@pytest.mark.parametrize("kind", ["world-writable", "symlink"])
+def test_a_shared_or_planted_cache_is_never_imported_from(tmp_path, monkeypatch, kind) -> None:
+    xml = _copy_xml(tmp_path)
+    monkeypatch.setenv("FTCAP_MAVLINK_CACHE", str(tmp_path / "probe"))
+    name = _fresh_load(xml).name  # the file name a planted module would need
+    planted = tmp_path / "shared"
+    planted.mkdir()
+    (planted / name).write_text("raise SystemExit('planted code ran')\n")
+    if kind == "world-writable":
+        planted.chmod(0o777)
+        cache = planted
+    else:
+        cache = tmp_path / "link"
+        cache.symlink_to(planted)
+    monkeypatch.setenv("FTCAP_MAVLINK_CACHE", str(cache))
+    path = _fresh_load(xml)  # would raise SystemExit if the planted module ran
+    assert path.parent != planted and not path.is_relative_to(cache)
+    assert path.parent.stat().st_mode & 0o777 == 0o700  # this process's own mkdtemp
+
+
+def test_install_writes_a_module_pymavlink_tools_import(tmp_path) -> None:
+    written = mavlink_dialect.install(tmp_path)
+    assert sorted(p.name for p in written) == ["ftcap.py", "ftcap.xml"]
+    spec = importlib.util.spec_from_file_location("ftcap_installed", tmp_path / "ftcap.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.MAVLINK_MSG_ID_FTCAP_STATUS == 52801
+
+
+def test_installed_dialect_lets_mavlogdump_decode_our_messages(tmp_path) -> None:
+    """The documented command, then pymavlink's own mavlogdump.py --dialect ftcap."""
+    out = subprocess.run(
+        [sys.executable, "-m", "bridges.mavlink.dialect", "--install"],
+        capture_output=True, text=True, timeout=120, check=True,
+    )  # fmt: skip
+    assert "dialects/v20/ftcap.py" in out.stdout
+    mav = DIALECT.MAVLink(None, srcSystem=1, srcComponent=191)
+    frame = DIALECT.MAVLink_ftcap_thrust_message(5, [0.25] * 16, 4).pack(mav)
+    log = tmp_path / "flight.tlog"
+    log.write_bytes(struct.pack(">Q", 1_700_000_000_000_000) + frame)  # tlog: usec + frame
+    dump = Path(sys.executable).with_name("mavlogdump.py")
+    shown = subprocess.run(
+        [sys.executable, str(dump), "--dialect", "ftcap", str(log)],
+        capture_output=True, text=True, timeout=120, check=True,
+    )  # fmt: skip
+    assert "FTCAP_THRUST" in shown.stdout and "UNKNOWN" not in shown.stdout

@@ -55,7 +55,7 @@ import threading
 from pathlib import Path
 from types import ModuleType
 
-__all__ = ["XML", "MESSAGE_IDS", "cache_dir", "load", "render", "install", "is_private"]
+__all__ = ["XML", "MESSAGE_IDS", "cache_dir", "load", "render", "install", "is_private", "share"]
 
 XML = Path(__file__).resolve().parent / "ftcap.xml"
 MESSAGE_IDS = range(52800, 52810)
@@ -211,6 +211,13 @@ def load(xml: Path = XML) -> ModuleType:
         spec.loader.exec_module(module)
         sys.modules[name] = module
         return module
+
+
+def share(module: Path) -> None:
+    """Make a cached module and its directory readable (not writable) by every user: an
+    image generates the cache as root at build time and runs as another user."""
+    module.chmod(0o644)
+    module.parent.chmod(0o755)
 
 
 def install(directory: Path | None = None) -> list[Path]:

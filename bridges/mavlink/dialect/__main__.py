@@ -1,7 +1,9 @@
 """``python -m bridges.mavlink.dialect [--out DIR | --install [--dir DIR]]``.
 
 Without options it fills the private cache used at run time and prints the cached file's
-path. ``--out DIR`` writes ``DIR/ftcap.py``. ``--install`` writes ``ftcap.py`` (and the XML)
+path; ``--shared`` then makes that cache readable (never writable) by other users, for an
+image built at install time by root and run by another user. ``--out DIR`` writes
+``DIR/ftcap.py``. ``--install`` writes ``ftcap.py`` (and the XML)
 into the installed pymavlink's ``dialects/v20`` so that pymavlink's tools decode the
 project's messages: ``mavproxy.py --dialect=ftcap``, ``mavlogdump.py --dialect ftcap``, or
 ``MAVLINK_DIALECT=ftcap`` for any ``mavutil`` program.
@@ -13,7 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from bridges.mavlink.dialect import install, load, render
+from bridges.mavlink.dialect import install, load, render, share
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -25,6 +27,9 @@ def main(argv: list[str] | None = None) -> int:
         "--install", action="store_true", help="install for pymavlink tools (--dialect ftcap)"
     )
     parser.add_argument("--dir", type=Path, help="with --install: this dialects directory")
+    parser.add_argument(
+        "--shared", action="store_true", help="make the filled cache readable by all users"
+    )
     args = parser.parse_args(argv)
     try:
         if args.install:
@@ -33,7 +38,10 @@ def main(argv: list[str] | None = None) -> int:
             sys.stdout.write("use: mavproxy.py --dialect=ftcap, mavlogdump.py --dialect ftcap\n")
             return 0
         if args.out is None:
-            sys.stdout.write(f"{load().__file__}\n")
+            path = Path(str(load().__file__))
+            if args.shared:
+                share(path)
+            sys.stdout.write(f"{path}\n")
             return 0
         args.out.mkdir(parents=True, exist_ok=True)
         target = args.out / "ftcap.py"

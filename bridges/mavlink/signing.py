@@ -1,7 +1,8 @@
 """MAVLink 2 message signing: the key file and the check of incoming signatures (no I/O
 beyond reading the key file).
 
-The key file holds a passphrase on its first line; the 32-byte secret key is its SHA-256,
+The key file holds a passphrase on its first line (one word: MAVProxy takes only the first word of
+``signing key PASSPHRASE``); the 32-byte secret key is its SHA-256,
 the convention of MAVProxy (``signing setup PASSPHRASE``), QGroundControl and Mission
 Planner, so the same passphrase configures them. The file must be a regular file owned by
 this user and readable by nobody else (mode 0600 or 0400), as ssh demands of its keys.

@@ -109,7 +109,7 @@ def test_every_command_to_the_allocator_is_acknowledged(allocator) -> None:
     gcs.mav.command_long_send(ALLOCATOR_IDS[0], 0, 31_000, 0, *[0] * 7)  # a broadcast
     gcs.pump(0.3)
     assert len(gcs.of_type("COMMAND_ACK")) == acks  # not ours to refuse: no ACK storm
-    assert link.commands.acked == 5
+    assert wait_until(lambda: link.commands.acked == 5)
 
 
 def test_esc_telemetry_goes_out_as_esc_status_and_esc_info(allocator) -> None:

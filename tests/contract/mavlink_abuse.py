@@ -18,6 +18,7 @@ import argparse
 import math
 import socket
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -137,6 +138,42 @@ def flood(
         if sock is not None:
             sock.close()
     return sent
+
+
+class Pinger:
+    """A ground station (a ``RawPeer``) reads ``name`` from ``target`` every ``period_s``;
+    :meth:`answered` counts the PARAM_VALUEs that came back."""
+
+    def __init__(
+        self,
+        gcs: Any,
+        period_s: float = 0.05,
+        name: str = "FTC_SP_TMO",
+        target: tuple[int, int] = (1, 191),
+    ) -> None:
+        self.name, self.target = name, target
+        self.gcs, self.period_s = gcs, period_s
+        self.sent = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.gcs.mav.param_request_read_send(*self.target, self.name.encode(), -1)
+            self.sent += 1
+            self._stop.wait(self.period_s)
+
+    def __enter__(self) -> Pinger:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def answered(self) -> int:
+        self.gcs.pump(0.5)
+        return len([m for m in self.gcs.of_type("PARAM_VALUE") if m.param_id == self.name])
 
 
 def udp_drops(port: int) -> int:

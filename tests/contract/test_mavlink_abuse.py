@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 
@@ -22,7 +21,7 @@ from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.config import ALLOCATOR_IDS, MavlinkEndpoint
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.peers import TrafficLimits
-from tests.contract.mavlink_abuse import flood, rss_bytes, udp_drops
+from tests.contract.mavlink_abuse import Pinger, flood, rss_bytes, udp_drops
 from tests.contract.test_mavlink_support import (
     RawPeer,
     free_udp_ports,
@@ -63,34 +62,6 @@ def _sent(proc: subprocess.Popen[str]) -> int:
     out, _ = proc.communicate(timeout=60)
     assert proc.returncode == 0
     return int(out.split()[-1])
-
-
-class Pinger:
-    """The ground station reads FTC_SP_TMO every ``period_s`` and counts the answers."""
-
-    def __init__(self, gcs: RawPeer, period_s: float = 0.05) -> None:
-        self.gcs, self.period_s = gcs, period_s
-        self.sent = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            self.gcs.mav.param_request_read_send(SYS, COMP, b"FTC_SP_TMO", -1)
-            self.sent += 1
-            self._stop.wait(self.period_s)
-
-    def __enter__(self) -> Pinger:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join()
-
-    def answered(self) -> int:
-        self.gcs.pump(0.5)
-        return len([m for m in self.gcs.of_type("PARAM_VALUE") if m.param_id == "FTC_SP_TMO"])
 
 
 def _assert_accounted(link: MavlinkAllocatorLink, port: int, sent: int, kernel0: int) -> None:

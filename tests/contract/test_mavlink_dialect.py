@@ -33,7 +33,12 @@ def test_our_ids_are_in_our_range_and_free_in_every_bundled_dialect() -> None:
     }
     assert all(i in mavlink_dialect.MESSAGE_IDS for i in own)
     assert {i: ours[i] for i in standard} == standard
-    bundled = sorted(mavlink_dialect.pymavlink_definitions_dir().glob("*.xml"))
+    # (ftcap.xml itself is there once `python -m bridges.mavlink.dialect --install` ran)
+    bundled = sorted(
+        p
+        for p in mavlink_dialect.pymavlink_definitions_dir().glob("*.xml")
+        if p.name != "ftcap.xml"
+    )
     assert any(p.name == "all.xml" for p in bundled)
     for xml in bundled:
         clash = set(own) & set(_message_ids(xml))

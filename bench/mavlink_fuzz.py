@@ -39,7 +39,7 @@ from bridges.mavlink.peers import TrafficLimits  # noqa: E402
 from bridges.mavlink.signing import passphrase_to_key, signing_timestamp  # noqa: E402
 from ftcap_hil.core.cycle import CoreConfig  # noqa: E402
 from tests.contract.mavlink_abuse import Pinger, rss_bytes, udp_drops  # noqa: E402
-from tests.contract.test_mavlink_support import RawPeer, free_udp_ports  # noqa: E402
+from tests.contract.mavlink_support import RawPeer, free_udp_ports  # noqa: E402
 
 PASSPHRASE = "ftcap-bench"
 

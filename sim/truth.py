@@ -96,6 +96,10 @@ class TruthModel:
         """(m,) what each healthy shaft would give now (for a stuck thruster's held force)."""
         return self._bank.shaft_thrust
 
+    def start(self) -> list[Measurement]:
+        """The odometry delivered at the start (before the first step)."""
+        return self._measure()
+
     def step(self, u: FloatArray, truth: Truth, dt_s: float) -> TruthStep:
         """Advance ``dt_s`` with commands ``u`` (m,) N and the faults ``truth`` held."""
         if not (math.isfinite(dt_s) and dt_s > 0.0):

@@ -1,26 +1,24 @@
 """Run the allocator daemon: setpoints and telemetry in (MAVLink, Zenoh), thrusters out (CAN).
 
 Configuration: ``--config FILE`` (default: the shipped ftcap_hil/data/hil/allocator.toml) and
-``--set SECTION.KEY=VALUE`` overrides. SIGINT/SIGTERM: a zero command, then exit 0.
+``--set SECTION.KEY=VALUE`` overrides. SIGINT/SIGTERM: a zero command, then exit 0; a second
+one while stopping: the zero, then exit 130.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import logging
-import sys
 import time
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from ftcap_hil.config.daemon import LoadedConfig, load_daemon_config
-from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
-from ftcap_hil.runtime.daemon import AllocatorDaemon, Ports
+from ftcap_hil.core.errors import ConfigError, FtcapError, PortError
+from ftcap_hil.runtime.allocator_ports import build_ports
+from ftcap_hil.runtime.command_log import CommandLog
+from ftcap_hil.runtime.daemon import AllocatorDaemon
+from ftcap_hil.runtime.param_sync import ParamSync
 
 log = logging.getLogger(__name__)
 
@@ -40,156 +38,58 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def apply_params(daemon: AllocatorDaemon, values: dict[str, float]) -> None:
-    """Loop thread: bring the daemon in line with the parameter table."""
-    from bridges.mavlink.allocator_params import MODE_CODES
+def wire(
+    cfg: LoadedConfig, stack: contextlib.ExitStack, command_log: Path | None = None
+) -> AllocatorDaemon:
+    """Open the ports ``cfg`` names (closed by ``stack``) and build the daemon on them, its
+    parameters kept in step with the MAVLink table. Start-up failures raise ConfigError
+    (a value the bridges refuse) or PortError (a port that cannot open)."""
+    cmd_log = None
+    if command_log is not None:
+        cmd_log = CommandLog(command_log, cfg.daemon.thrusters.m)
+        stack.callback(cmd_log.close)
+    try:
+        ports, params = build_ports(cfg, stack, cmd_log)
+    except FtcapError:
+        raise
+    except (ValueError, TypeError) as e:
+        raise ConfigError(f"start-up failed: {e}") from e
+    except (RuntimeError, OSError) as e:
+        raise PortError(f"start-up failed: {e}") from e
+    daemon = AllocatorDaemon(cfg.daemon, ports)
+    if params is not None:
+        daemon.before_cycle.append(ParamSync(daemon, params))
+        params.set_running(True)
+    return daemon
 
-    mode = MODE_CODES[int(values["FTC_MODE"])]
-    if mode is not daemon.config.core.mode:
-        daemon.set_mode(mode)
-        log.info("mode -> %s", mode.value)
-    daemon.config = dataclasses.replace(
-        daemon.config,
-        setpoint_timeout_s=values["FTC_SP_TMO"],
-        telemetry_timeout_s=values["FTC_TLM_TMO"],
-        esc_timeout_s=values["FTC_ESC_TMO"],
+
+def _load(args: argparse.Namespace) -> LoadedConfig:
+    try:
+        return load_daemon_config(args.config, args.set)
+    except FtcapError:
+        raise
+    except ValueError as e:
+        raise ConfigError(str(e)) from e
+
+
+def _log_summary(daemon: AllocatorDaemon) -> None:
+    for line in daemon.latency.summary_lines():
+        log.info("%s", line)
+    log.info(
+        "allocator: stopped after %d cycles, %d overruns, %d commands refused by the bus, "
+        "%d malformed inputs dropped",
+        daemon.cycles,
+        daemon.overruns,
+        daemon.not_sent,
+        daemon.ports.malformed(),
     )
-    core = daemon.core
-    core.retune(
-        allocator=dataclasses.replace(
-            core.config.allocator,
-            slack_weight=values["FTC_SLACK_W"],
-            effort_weight=values["FTC_EFFORT_W"],
-            dead_threshold=values["FTC_DEAD_THR"],
-        ),
-        excitation=dataclasses.replace(
-            core.config.excitation,
-            dither_amplitude=values["FTC_DITHER"],
-            probe_interval=int(values["FTC_PROBE_INT"]),
-        ),
-    )
-    daemon.config = dataclasses.replace(daemon.config, core=core.config)
-
-
-def _section(cfg: LoadedConfig, name: str) -> dict[str, Any]:
-    table = cfg.raw.get(name, {})
-    if not isinstance(table, dict):
-        raise ConfigError(f"{cfg.source}.{name}: expected a table")
-    return dict(table)
-
-
-def open_can(cfg: LoadedConfig, stack: contextlib.ExitStack) -> tuple[Any, Any]:
-    from bridges.can_io.adapters import CanEscStatusSource, CanThrusterSink
-    from bridges.can_io.bus import open_can_bus
-    from bridges.can_io.force_map import ForceRawMap
-
-    c = _section(cfg, "can")
-    ths = cfg.daemon.thrusters
-    bus = stack.enter_context(
-        open_can_bus(str(c.get("interface", "canhub")), str(c.get("channel", "127.0.0.1:29536")))
-    )
-    fmap = ForceRawMap.from_limits(ths.u_min, ths.u_max, float(c.get("deadband_n", 0.0)))
-    sink = stack.enter_context(
-        CanThrusterSink(bus, fmap, node_id=int(c.get("node_id", 10)), zero_on_shutdown=True)
-    )
-    esc_ids = c.get("esc_node_ids")
-    esc = None
-    if c.get("esc_monitor", True):
-        esc = stack.enter_context(CanEscStatusSource(bus, ths.m, esc_node_ids=esc_ids))
-    return sink, esc
-
-
-def build_ports(
-    cfg: LoadedConfig,
-    stack: contextlib.ExitStack,
-    cmd_log: CommandLog | None,
-) -> tuple[Ports, Any]:
-    sink, esc = open_can(cfg, stack)
-    ports = Ports(
-        setpoints=[],
-        telemetry=[],
-        thrusters=LoggedSink(sink, cfg.daemon.thrusters.m, cmd_log),
-        esc_ages=esc.ages_s if esc is not None else None,
-    )
-    params = None
-    mav_cfg = _section(cfg, "mavlink")
-    if mav_cfg.pop("enabled", True):
-        from bridges.mavlink import allocator as mav
-        from bridges.mavlink.allocator_params import allocator_param_specs
-        from bridges.mavlink.config import MavlinkEndpoint, default_allocator_endpoint
-        from bridges.mavlink.status import MavlinkStatusSink
-
-        d = cfg.daemon
-        max_wrench = tuple(mav_cfg.pop("max_wrench", (0.3, 0.3, 0.06)))
-        limit = mav_cfg.pop("wrench_limit", None)
-        endpoint = MavlinkEndpoint.from_mapping("mavlink", mav_cfg, default_allocator_endpoint())
-        link = stack.enter_context(
-            mav.MavlinkAllocatorLink(
-                mav.AllocatorLinkConfig(
-                    cfg.daemon.thrusters.m, max_wrench, None if limit is None else tuple(limit)
-                ),
-                endpoint,
-                allocator_param_specs(
-                    d.core,
-                    d.setpoint_timeout_s,
-                    d.telemetry_timeout_s,
-                    d.esc_timeout_s,
-                    d.rate_hz,
-                    float(np.max(d.thrusters.u_max)),
-                ),
-            )
-        )
-        ports.setpoints += [link.setpoint, link.manual]
-        ports.telemetry.append(link.odometry)
-        ports.status.append(MavlinkStatusSink(link))
-        params = link.params
-    z_cfg = _section(cfg, "zenoh")
-    if z_cfg.pop("enabled", True):
-        from bridges.zenoh_io import config as zenoh_config
-        from bridges.zenoh_io import link as zenoh_link
-        from bridges.zenoh_io.status import ZenohStatusSink
-
-        conf_name = str(z_cfg.get("config", "allocator.json5"))
-        path = Path(conf_name)
-        if not path.exists():
-            path = zenoh_config.shipped_config_path(conf_name.removesuffix(".json5"))
-        conf = zenoh_link.load_config(path, list(z_cfg.get("overrides", [])))
-        zl = stack.enter_context(
-            zenoh_link.ZenohAllocatorLink(str(z_cfg.get("vessel", "ftcap1")), conf)
-        )
-        ports.setpoints.append(zl.setpoints)
-        ports.telemetry.append(zl.odometry)
-        ports.status.append(ZenohStatusSink(zl))
-    return ports, params
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        cfg = load_daemon_config(args.config, args.set)
-    except (ConfigError, ValueError) as e:
-        print(f"ftcap-hil allocator: {e}", file=sys.stderr)
-        return 2
+    """Load, wire, run until stopped; the exit code (errors raise, see core/errors.py)."""
+    cfg = _load(args)
     with contextlib.ExitStack() as stack:
-        cmd_log = None
-        if args.command_log:
-            cmd_log = CommandLog(args.command_log, cfg.daemon.thrusters.m)
-            stack.callback(cmd_log.close)
-        try:
-            ports, params = build_ports(cfg, stack, cmd_log)
-        except (ConfigError, ValueError, RuntimeError, OSError) as e:
-            print(f"ftcap-hil allocator: start-up failed: {e}", file=sys.stderr)
-            return 2
-        daemon = AllocatorDaemon(cfg.daemon, ports)
-        if params is not None:
-            seen = [-1]
-
-            def sync_params() -> None:
-                if params.generation != seen[0]:
-                    seen[0] = params.generation
-                    apply_params(daemon, params.values())
-
-            daemon.before_cycle.append(sync_params)
-            params.set_running(True)
+        daemon = wire(cfg, stack, args.command_log)
         if args.duration:
             stop_at = time.monotonic() + args.duration
             daemon.before_cycle.append(
@@ -201,36 +101,10 @@ def run(args: argparse.Namespace) -> int:
             cfg.daemon.rate_hz,
             cfg.daemon.thrusters.m,
             cfg.daemon.core.mode.value,
-            len(ports.setpoints),
-            len(ports.telemetry),
+            len(daemon.ports.setpoints),
+            len(daemon.ports.telemetry),
         )
-        code = daemon.run()
-        if daemon.cycle_ns:
-            c = np.array(daemon.cycle_ns) * 1e-3
-            log.info(
-                "cycle time: median %.0f us, p99 %.0f us, p99.9 %.0f us, max %.0f us",
-                np.median(c),
-                np.percentile(c, 99),
-                np.percentile(c, 99.9),
-                c.max(),
-            )
-        if daemon.reaction_ns:
-            r = np.array(daemon.reaction_ns) * 1e-3
-            log.info(
-                "setpoint received -> command sent: median %.0f us, p99 %.0f us (n=%d)",
-                np.median(r),
-                np.percentile(r, 99),
-                r.size,
-            )
-        malformed = sum(b.malformed for b in ports.setpoints) + sum(
-            b.malformed for b in ports.telemetry
-        )
-        log.info(
-            "allocator: stopped after %d cycles, %d overruns, %d commands refused by the bus, "
-            "%d malformed inputs dropped",
-            daemon.cycles,
-            daemon.overruns,
-            daemon.not_sent,
-            malformed,
-        )
-        return code
+        try:
+            return daemon.run()
+        finally:
+            _log_summary(daemon)

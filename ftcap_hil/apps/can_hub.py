@@ -2,21 +2,24 @@
 
 Every ``canhub`` client (``interface = "canhub"``, ``channel = "127.0.0.1:PORT"``) connected
 to this hub sees every frame the others send. Prints ``can_hub listening on HOST:PORT`` when
-ready; stops on SIGINT/SIGTERM.
+ready; once a second logs the bytes dropped for slow clients if more were (the hub itself
+logs a client's drops only when it leaves); stops on SIGINT/SIGTERM (exit 0; a second one:
+at once, 130). A port that cannot be bound exits 1.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
-import threading
-from types import FrameType
 
 from bridges.can_io.hub import DEFAULT_HOST, DEFAULT_PORT, CanHub
+from ftcap_hil.core.errors import PortError
+from ftcap_hil.runtime.loop import DeadlineLoop
+from ftcap_hil.runtime.signals import capture_signals
 
 log = logging.getLogger(__name__)
+REPORT_PERIOD_NS = 1_000_000_000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,26 +29,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-queue-bytes", type=int, default=1 << 20)
 
 
+class DropReport:
+    """The loop's tick: a warning when the hub dropped more bytes since the last tick."""
+
+    def __init__(self, hub: CanHub) -> None:
+        self._hub = hub
+        self._dropped = 0
+
+    def __call__(self, now_ns: int) -> None:
+        dropped = self._hub.bytes_dropped
+        if dropped > self._dropped:
+            log.warning("can hub: %d bytes dropped for slow clients so far", dropped)
+            self._dropped = dropped
+
+
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT/SIGTERM; print the ready line first. Returns the exit code."""
-    stop = threading.Event()
-
-    def _on_signal(signum: int, frame: FrameType | None) -> None:
-        stop.set()
-
-    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    loop = DeadlineLoop(REPORT_PERIOD_NS)
+    with capture_signals(loop.request_exit):
         try:
             hub = CanHub(args.host, args.port, args.max_queue_bytes).start()
         except (OSError, ValueError) as e:
-            log.error("can hub: cannot listen on %s:%s: %s", args.host, args.port, e)
-            return 1
+            raise PortError(f"cannot listen on {args.host}:{args.port}: {e}") from e
         with hub:
             sys.stdout.write(f"can_hub listening on {hub.channel}\n")
             sys.stdout.flush()
-            while not stop.wait(0.5):
-                pass
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+            loop.run(DropReport(hub), first_deadline_ns=loop.clock() + REPORT_PERIOD_NS)
     return 0

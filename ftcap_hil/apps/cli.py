@@ -2,6 +2,11 @@
 
 Subcommands are registered lazily (name -> module:function) so ``ftcap-hil simulate`` does
 not import the networking stacks and the daemon does not import matplotlib.
+
+Errors: an :class:`~ftcap_hil.core.errors.FtcapError` that reaches the top is printed as
+``ftcap-hil <command>: <message>`` on stderr and the command exits with its ``exit_code``
+(the table in ``ftcap_hil/core/errors.py``); an interrupt (Ctrl-C outside a loop's signal
+capture, or a second stop signal, ``ForcedExit``) exits 130.
 """
 
 from __future__ import annotations
@@ -12,6 +17,8 @@ import importlib.util
 import logging
 import sys
 from collections.abc import Callable, Sequence
+
+from ftcap_hil.core.errors import ExitCode, FtcapError
 
 # name -> (module with add_arguments(parser) and run(args) -> exit code, help)
 _COMMANDS: dict[str, tuple[str, str]] = {
@@ -56,7 +63,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2) if args.verbose else logging.INFO
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
-    return runners[args.command](args)
+    try:
+        return int(runners[args.command](args))
+    except FtcapError as e:
+        print(f"ftcap-hil {args.command}: {e}", file=sys.stderr)
+        return int(e.exit_code)
+    except KeyboardInterrupt as e:  # ForcedExit is one
+        why = f" ({e})" if str(e) else ""
+        print(f"ftcap-hil {args.command}: interrupted{why}", file=sys.stderr)
+        return int(ExitCode.INTERRUPTED)
 
 
 if __name__ == "__main__":

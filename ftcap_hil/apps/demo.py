@@ -16,8 +16,10 @@ station's T_s and mission clock are all wall-clock and would all have to be scal
 a compressed schedule keeps every timing as on the real vessel.
 
 Stopping: SIGTERM to each child still running, newest first, then SIGKILL after a grace
-period; also on Ctrl-C, on SIGTERM and when any child dies early. Exit code: 0 if every child
-ended cleanly and the ground station flew the mission, 1 otherwise, 130 if interrupted.
+period; also on Ctrl-C, on SIGTERM and when any child dies early. A second Ctrl-C or SIGTERM
+while stopping skips the grace period (SIGKILL at once). Exit code: 0 if every child ended
+cleanly and the ground station flew the mission, 1 otherwise, 2 for a bad command line or
+mission, 130 if interrupted.
 """
 
 from __future__ import annotations
@@ -36,7 +38,11 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
+
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.runtime.loop import DeadlineLoop
+from ftcap_hil.runtime.signals import SignalCapture, capture_signals
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +51,7 @@ DEFAULT_MISSION = "paper-4.2-ex1-short"
 PAPER_MISSION = "paper-4.2-ex1"
 STOP_GRACE_S = 8.0
 HUB_READY = re.compile(r"can_hub listening on 127\.0\.0\.1:(\d+)")
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+SUPERVISE_PERIOD_NS = 200_000_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -75,10 +81,12 @@ class Child:
 
 @dataclass
 class Supervisor:
-    """Children started in order, stopped newest first; every stop is by PID."""
+    """Children started in order, stopped newest first; every stop is by PID. After
+    :meth:`hurry` (a second stop signal) a child gets no grace period."""
 
     log_dir: Path
     children: list[Child] = field(default_factory=list)
+    hurried: bool = False
 
     def start(self, name: str, argv: list[str]) -> Child:
         path = self.log_dir / f"{name}.log"
@@ -109,19 +117,30 @@ class Supervisor:
             (c for c in self.children if c is not exclude and c.proc.poll() is not None), None
         )
 
+    def hurry(self) -> None:
+        """Signal-handler safe: from now on, SIGKILL without waiting."""
+        self.hurried = True
+
+    def _ended(self, child: Child, grace_s: float) -> bool:
+        """Whether ``child`` exits within ``grace_s`` (less once hurried)."""
+        deadline = time.monotonic() + grace_s
+        while not self.hurried and (left := deadline - time.monotonic()) > 0:
+            try:
+                child.proc.wait(min(left, 0.1))
+                return True
+            except subprocess.TimeoutExpired:
+                pass
+        return child.proc.poll() is not None
+
     def stop(self, child: Child, grace_s: float = STOP_GRACE_S) -> None:
         if child.proc.poll() is None:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(child.pid, signal.SIGTERM)
-            try:
-                child.proc.wait(grace_s)
-            except subprocess.TimeoutExpired:
-                log.warning(
-                    "%s (pid %d) ignored SIGTERM for %.0f s: SIGKILL",
-                    child.name,
-                    child.pid,
-                    grace_s,
+            if not self._ended(child, grace_s):
+                why = (
+                    "second stop signal" if self.hurried else f"ignored SIGTERM for {grace_s:.0f} s"
                 )
+                log.warning("%s (pid %d): %s: SIGKILL", child.name, child.pid, why)
                 child.killed = True
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(child.pid, signal.SIGKILL)
@@ -225,36 +244,38 @@ def wait_for_hub(child: Child, stop: StopRequest, timeout_s: float = 15.0) -> in
 
 
 class Interrupted(Exception):
-    pass
+    """A stop signal arrived: the demo stops its children and exits 130."""
 
 
 class StopRequest:
-    """SIGINT / SIGTERM handler that only takes note, so that a signal can never land
-    between starting a child and recording it, nor cut the clean-up short; ``check``
-    raises Interrupted at the next safe point."""
+    """A stop asked for by SIGINT / SIGTERM, acted on at the next safe point.
 
-    def __init__(self) -> None:
-        self.signal_name: str | None = None
+    The signal capture only takes note (its handlers never raise here: a second signal
+    calls ``Supervisor.hurry``), so that a signal can never land between starting a child
+    and recording it, nor cut the clean-up short; ``check`` raises Interrupted."""
 
-    def __call__(self, signum: int, _frame: Any) -> None:
-        if self.signal_name is not None:
-            log.warning("%s: already stopping", signal.Signals(signum).name)
-        self.signal_name = signal.Signals(signum).name
+    def __init__(self, signals: SignalCapture) -> None:
+        self._signals = signals
 
     def check(self) -> None:
-        if self.signal_name is not None:
-            raise Interrupted(self.signal_name)
+        if self._signals.stopping:
+            raise Interrupted(self._signals.signal_name)
 
 
 def supervise(
-    sup: Supervisor, gcs: Child, stop: StopRequest, budget_s: float, expected_s: float
+    sup: Supervisor,
+    gcs: Child,
+    loop: DeadlineLoop,
+    stop: StopRequest,
+    budget_s: float,
+    expected_s: float,
 ) -> None:
-    """Until the ground station ends; RuntimeError if another child dies first or the
-    ground station overruns ``budget_s``."""
+    """Until the ground station ends (or a stop signal ends ``loop``); RuntimeError if
+    another child dies first or the ground station overruns ``budget_s``."""
     started = time.monotonic()
     tty = sys.stdout.isatty()
-    while gcs.proc.poll() is None:
-        stop.check()
+
+    def tick(now_ns: int) -> None:
         if (dead := sup.died(exclude=gcs)) is not None:
             raise RuntimeError(
                 f"{dead.name} (pid {dead.pid}) exited early with code "
@@ -266,9 +287,11 @@ def supervise(
         if tty:
             sys.stdout.write(f"\rdemo: {elapsed:5.0f} s of about {expected_s:.0f} s\x1b[K")
             sys.stdout.flush()
-        time.sleep(0.2)
+
+    loop.run(tick, until=lambda: gcs.proc.poll() is not None)
     if tty:
         sys.stdout.write("\r\x1b[K")
+    stop.check()
 
 
 def start_all(
@@ -308,36 +331,49 @@ def print_summary(out: Path, wall_s: float) -> None:
     print(f"logs: {out / 'logs'}; wall time {wall_s:.1f} s")
 
 
+def _fly(
+    sup: Supervisor,
+    loop: DeadlineLoop,
+    stop: StopRequest,
+    args: argparse.Namespace,
+    mission: str,
+    out: Path,
+    expected_s: float,
+) -> int:
+    """Start everything, supervise, stop everything; the exit code before child failures."""
+    try:
+        print(f"demo: flying {mission} for {expected_s:.0f} s; logs in {out / 'logs'}", flush=True)
+        gcs = start_all(sup, stop, args, mission, out)
+        supervise(sup, gcs, loop, stop, budget_s=expected_s + 120.0, expected_s=expected_s)
+    except Interrupted as e:
+        log.error("interrupted (%s): stopping everything", e)
+        return 130
+    except (RuntimeError, OSError) as e:
+        log.error("%s", e)
+        return 1
+    finally:
+        sup.stop_all()
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    """Fly the demo; the exit code (module docstring)."""
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        print(f"ftcap-hil demo: --duration must be positive, got {args.duration}", file=sys.stderr)
-        return 2
+        raise ConfigError(f"--duration must be positive, got {args.duration}")
     mission = args.mission or (DEFAULT_MISSION if args.duration is None else PAPER_MISSION)
     out = args.out or Path("ftcap-runs") / f"demo-{time.strftime('%Y%m%d-%H%M%S')}"
     try:
         expected = expected_duration(mission, args.duration)
-    except ValueError as e:  # ConfigError is a ValueError
-        print(f"ftcap-hil demo: {e}", file=sys.stderr)
-        return 2
+    except ConfigError:
+        raise
+    except ValueError as e:
+        raise ConfigError(str(e)) from e
     (out / "logs").mkdir(parents=True, exist_ok=True)
     sup = Supervisor(out / "logs")
-    stop = StopRequest()
-    saved = {s: signal.signal(s, stop) for s in STOP_SIGNALS}
-    started, code = time.monotonic(), 0
-    try:
-        print(f"demo: flying {mission} for {expected:.0f} s; logs in {out / 'logs'}", flush=True)
-        gcs = start_all(sup, stop, args, mission, out)
-        supervise(sup, gcs, stop, budget_s=expected + 120.0, expected_s=expected)
-    except Interrupted as e:
-        log.error("interrupted (%s): stopping everything", e)
-        code = 130
-    except (RuntimeError, OSError) as e:
-        log.error("%s", e)
-        code = 1
-    finally:
-        sup.stop_all()
-        for sig, handler in saved.items():
-            signal.signal(sig, handler)
+    loop = DeadlineLoop(SUPERVISE_PERIOD_NS)
+    started = time.monotonic()
+    with capture_signals(loop.request_exit, on_force=sup.hurry) as signals:
+        code = _fly(sup, loop, StopRequest(signals), args, mission, out, expected)
     for failure in sup.failures():
         log.error("child failed: %s", failure)
         code = code or 1

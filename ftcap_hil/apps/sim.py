@@ -1,9 +1,9 @@
 """Run the simulated vessel: plant, ESCs on CAN, odometry out, fault injection in.
 
 Configuration: the shipped ``ftcap_hil/data/hil/vessel.toml`` (or ``--config``) plus
-``--set SECTION.KEY=VALUE``. SIGINT/SIGTERM end the run cleanly (exit 0). ``--record
-FILE.csv`` writes one row per telemetry sample: true state, commands, produced forces and
-true faults.
+``--set SECTION.KEY=VALUE``. SIGINT/SIGTERM end the run cleanly (exit 0; a second one: at
+once, 130). ``--record FILE.csv`` writes one row per telemetry sample: true state, commands,
+produced forces and true faults. A bad configuration exits 2, a port that cannot open 1.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import logging
 from pathlib import Path
 
 from ftcap_hil.config.sim import load_config
-from ftcap_hil.core.errors import ConfigError, PortError
+from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.runtime.vessel_process import Recorder, VesselPorts, VesselProcess
 
 log = logging.getLogger(__name__)
@@ -35,27 +35,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Load, open the ports, run until stopped; the exit code (errors raise ConfigError or
+    PortError, see core/errors.py)."""
     if args.duration is not None and not args.duration > 0:
-        log.error("--duration: expected a positive number of seconds, got %s", args.duration)
-        return 2
+        raise ConfigError(f"--duration: expected a positive number of seconds, got {args.duration}")
+    cfg = load_config(args.config, args.set, args.scenario)
     with contextlib.ExitStack() as stack:
-        try:
-            cfg = load_config(args.config, args.set, args.scenario)
-            ports = VesselPorts.open(cfg.raw, cfg.sim.thrusters, cfg.shell.fault_injection_enabled)
-        except ConfigError as e:
-            log.error("configuration error: %s", e)
-            return 2
-        except PortError as e:
-            log.error("%s", e)
-            return 1
+        ports = VesselPorts.open(cfg.raw, cfg.sim.thrusters, cfg.shell.fault_injection_enabled)
         stack.callback(ports.shutdown)
         recorder = None
         if args.record is not None:
             try:
                 fh = stack.enter_context(open(args.record, "w", newline=""))
             except OSError as e:
-                log.error("--record: cannot write %s: %s", args.record, e)
-                return 2
+                raise ConfigError(f"--record: cannot write {args.record}: {e}") from e
             recorder = Recorder(fh, cfg.sim.thrusters)
         log.info("simulated vessel running (%s), %d thrusters", cfg.source, cfg.sim.thrusters.m)
         return VesselProcess(cfg, ports, recorder, args.duration).run()

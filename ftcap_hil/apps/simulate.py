@@ -14,6 +14,7 @@ from pathlib import Path
 
 from ftcap_hil.config.scenario import load_scenario, shipped_scenarios
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.summary import offline_summary_lines
 
@@ -42,9 +43,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def run(args: argparse.Namespace) -> int:
-    from ftcap_hil.runtime.offline import run_modes
-
+def _scenario(args: argparse.Namespace) -> Scenario:
+    """The scenario with the command line's overrides; ConfigError naming what is wrong."""
     try:
         sc = load_scenario(args.scenario)
         if args.integrator:
@@ -52,12 +52,20 @@ def run(args: argparse.Namespace) -> int:
         if args.inversion:
             if not hasattr(sc.plant, "inversion"):
                 raise ConfigError("--inversion applies to the vessel plant only")
-            sc = dataclasses.replace(
-                sc, plant=dataclasses.replace(sc.plant, inversion=args.inversion)
-            )
-    except (ConfigError, ValueError) as e:
-        print(f"ftcap-hil simulate: {e}", file=sys.stderr)
-        return 2
+            plant = dataclasses.replace(sc.plant, inversion=args.inversion)
+            sc = dataclasses.replace(sc, plant=plant)
+    except ConfigError:
+        raise
+    except ValueError as e:
+        raise ConfigError(str(e)) from e
+    return sc
+
+
+def run(args: argparse.Namespace) -> int:
+    """Fly the scenario offline in the modes asked for; write results (and plots)."""
+    from ftcap_hil.runtime.offline import run_modes
+
+    sc = _scenario(args)
     modes = [Mode.NONE, Mode(args.mode)] if args.mode else list(Mode)
     modes = list(dict.fromkeys(modes))
     records = run_modes(sc, modes, progress=not args.quiet and sys.stderr.isatty())

@@ -27,7 +27,7 @@ beyond reading the files.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,41 +36,13 @@ import numpy as np
 from ftcap_hil.config.scenario import SHIPPED, parse_scenario
 from ftcap_hil.config.toml import read_toml, shipped_names
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
+from ftcap_hil.runtime.ground_station import GcsSettings, Mission
 
 MISSIONS = "ftcap_hil.data.hil.missions"
 MISSION_KEYS = {"name", "description", "scenario", "duration", "period", "mode"}
 GCS_KEYS = {"connect_timeout_s", "odometry_timeout_s", "wrench_limit", "clear_faults_at_end"}
 REPLACEABLE = ("controller", "reference", "fault")
-
-
-@dataclass(frozen=True)
-class GcsSettings:
-    connect_timeout_s: float = 20.0
-    odometry_timeout_s: float = 5.0
-    wrench_limit: tuple[float, float, float] = (1000.0, 1000.0, 1000.0)  # the allocator's
-    clear_faults_at_end: bool = True
-
-
-@dataclass(frozen=True)
-class Mission:
-    name: str
-    description: str
-    scenario: Scenario  # reference, faults (truth), controller; duration_s = the mission's
-    period_s: float  # control period T_s
-    mode: Mode | None  # None: fly with whatever mode the allocator is in
-    gcs: GcsSettings
-    source: str
-
-    @property
-    def duration_s(self) -> float:
-        return self.scenario.duration_s
-
-    def with_duration(self, duration_s: float) -> Mission:
-        if not (math.isfinite(duration_s) and duration_s > 0):
-            raise ConfigError(f"duration: expected a positive number of seconds, got {duration_s}")
-        return replace(self, scenario=replace(self.scenario, duration_s=float(duration_s)))
 
 
 def shipped_missions() -> list[str]:

@@ -34,8 +34,9 @@ A realistic scenario is a scenario file whose ``[plant]`` names a preset
     damping = 0.9
 
 The other tables ([scenario], [[reference]], [[fault]], [estimator], [allocator],
-[excitation]) are those of every scenario file. The estimator is told the preset's sensor
-levels (``measurement_std``) unless the file states them.
+[excitation]) are those of every scenario file; ``[scenario] estimation_period`` (s, a
+multiple of ``dt``) spaces the estimation samples over several wave periods. The estimator
+is told the preset's sensor levels (``measurement_std``) unless the file states them.
 """
 
 from __future__ import annotations
@@ -52,8 +53,10 @@ from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import TomlFile
 from ftcap_hil.core.controllers import PoseController
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.estimator import EstimatorConfig
 from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.scenario import Scenario
+from sim.environment import CurrentConfig, Environment, WindConfig
 from sim.sensors import SensorConfig
 from sim.thrusters import ThrusterBankConfig
 from sim.truth import TruthConfig
@@ -83,16 +86,21 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     plant_t.finish()
     told = _allocator_model(preset, root.table("mismatch"), inversion)
     sc = parse_scenario(_common_tables(data, told.thrusters), where)
-    controller = _controller(root.table("controller"), np.diag(told.vessel.mass_matrix))
     truth, sensor = _truth(preset, root, seed, substeps, sc.dt_s)
+    controller = _controller(root.table("controller"), np.diag(told.vessel.mass_matrix))
     core = sc.core
+    if truth.bank.time_constant_s.any():  # the allocator is told the thrusters' lag
+        core = dataclasses.replace(core, thruster_lag_s=tuple(truth.bank.time_constant_s.tolist()))
     if core.estimator.measurement_std is None and sensor is not None:
         std = tuple(float(v) for v in sensor.noise_std[3:6])
         core = dataclasses.replace(
             core, estimator=dataclasses.replace(core.estimator, measurement_std=std)
         )
+    core = dataclasses.replace(core, estimator=_told_waves(core.estimator, truth))
+    est_period = _estimation_period(data, where, sc.dt_s)
     return dataclasses.replace(
         sc,
+        estimation_period_s=est_period,
         plant=told.vessel,
         controller=controller,
         core=core,
@@ -101,6 +109,36 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
         truth=truth,
         length_m=preset.hull.l_oa_m,
     )
+
+
+def _told_waves(est: EstimatorConfig, truth: TruthConfig) -> EstimatorConfig:
+    """The estimator is told the sea state as a DP system's wave model is tuned: the peak
+    period and the first-order load's level per axis (here measured over 10 minutes at rest
+    on another realisation of the same sea state: a different seed), unless the file sets
+    ``[estimator] wave_period_s``."""
+    env = truth.environment
+    if env is None or truth.hull is None or not env.waves.enabled or est.wave_period_s > 0.0:
+        return est
+    sea = Environment(dataclasses.replace(env, current=CurrentConfig(), wind=WindConfig()),
+                      truth.hull, seed=env.seed + 1)  # fmt: skip
+    t = np.arange(0.0, 600.0, env.waves.tp_s / 20.0)
+    loads = np.array([sea.wave_wrench(float(ti), np.zeros(6)) for ti in t])
+    std = est.wave_force_std or tuple(float(v) for v in loads.std(axis=0))
+    return dataclasses.replace(est, wave_period_s=env.waves.tp_s, wave_force_std=std)
+
+
+def _estimation_period(data: dict[str, Any], where: str, dt_s: float) -> float | None:
+    """``[scenario] estimation_period`` (s): a whole number of control periods."""
+    value = data.get("scenario", {}).get("estimation_period")
+    if value is None:
+        return None
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and value >= dt_s
+    if not ok or abs(value / dt_s - round(value / dt_s)) > 1e-6:
+        raise ConfigError(
+            f"{where}: [scenario] estimation_period: expected a multiple of dt ({dt_s} s), "
+            f"got {value!r}"
+        )
+    return float(value)
 
 
 def _seed(data: dict[str, Any], where: str) -> int:
@@ -139,6 +177,7 @@ def _common_tables(data: dict[str, Any], thrusters: ThrusterSet) -> dict[str, An
     """The document with the preset's tables replaced by a plain vessel the common scenario
     loader reads (its thrusters are the allocator's; its plant is replaced afterwards)."""
     out = {k: copy.deepcopy(v) for k, v in data.items() if k not in OWN_TABLES}
+    out["scenario"] = {k: v for k, v in out.get("scenario", {}).items() if k != "estimation_period"}
     out["plant"] = {"kind": "vessel", "mass_kg": 1.0, "iz_kgm2": 1.0}
     out["vessel"] = {
         "thruster": [

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.config.fault_keys import fault_event
+from ftcap_hil.config.realistic import is_realistic, parse_realistic
 from ftcap_hil.config.tables import dataclass_from_table, get, number, vector
 from ftcap_hil.config.toml import read_toml, shipped_names
 from ftcap_hil.config.vessel import plant_from_tables
@@ -55,6 +56,8 @@ def _faults(entries: list[dict[str, Any]], m: int, where: str) -> FaultSchedule:
 
 
 def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
+    if is_realistic(data):
+        return parse_realistic(data, where)
     head = get(data, "scenario", where)
     plant, ths, B = plant_from_tables(data, where)
     k = B.shape[0]

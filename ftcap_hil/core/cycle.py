@@ -41,8 +41,8 @@ from ftcap_hil.core.excitation import Excitation, ExcitationConfig
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, FloatArray
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.status import Mode
+from ftcap_hil.core.vessel3dof import PlantModel
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,30 @@ class CoreConfig:
     # cleared when it rises above fault_clear (when each stage may change them: estimation.py).
     fault_threshold: float = 0.85
     fault_clear: float = 0.95
+    # First-order lag of each thruster's force behind its command (s, (m,) or empty: none),
+    # as its data sheet or a step test gives it; the estimator then compares the motion with
+    # the lagged force, not with the command.
+    thruster_lag_s: tuple[float, ...] = ()
+
+
+class ThrustLag:
+    """The mean force a first-order lag (time constants T, (m,) s) delivers over an interval
+    of dt under a constant command c: F_mean = c + (F0 - c) T/dt (1 - exp(-dt/T)), exact;
+    F0 is the force at the interval's start, carried from one call to the next."""
+
+    def __init__(self, time_constants_s: FloatArray) -> None:
+        self._tc = np.asarray(time_constants_s, dtype=np.float64)
+        self._f = np.zeros(self._tc.size)
+
+    def mean_force(self, c: FloatArray, dt_s: float) -> FloatArray:
+        """The interval's mean force (m,) under the command ``c`` (m,) held for ``dt_s``."""
+        lagged = self._tc > 0.0
+        tc = np.where(lagged, self._tc, 1.0)
+        a = np.where(lagged, np.exp(-dt_s / tc), 0.0)
+        b = np.where(lagged, tc / dt_s * (1.0 - a), 0.0)
+        mean: FloatArray = c + (self._f - c) * b
+        self._f = c + (self._f - c) * a
+        return mean
 
 
 @dataclass(frozen=True)
@@ -101,7 +125,7 @@ class FtcapCore:
         thrusters: ThrusterSet,
         dt_s: float,
         config: CoreConfig | None = None,
-        plant: LinearPlant | SurfaceVessel | None = None,
+        plant: PlantModel | None = None,
     ):
         self.config = config or CoreConfig()
         self.B = np.array(B, dtype=np.float64)
@@ -113,6 +137,10 @@ class FtcapCore:
         self.u_range = np.maximum(np.abs(thrusters.u_min), np.abs(thrusters.u_max))
         self.excitation = Excitation(self.B, self.u_range, self.config.excitation)
         self.stage = self._make_stage(plant)
+        lag = self.config.thruster_lag_s
+        if lag and len(lag) != self.m:
+            raise ValueError(f"thruster_lag_s: expected {self.m} time constants, got {lag}")
+        self._lag = ThrustLag(np.array(lag)) if lag and max(lag) > 0.0 else None
         self._unsized = isinstance(self.stage, KalmanStage) and self.config.excitation.info_rate > 0
         self.u_prev = np.zeros(self.m)
 
@@ -132,7 +160,7 @@ class FtcapCore:
         self.config = replace(self.config, excitation=sized)
         self._unsized = False
 
-    def _make_stage(self, plant: LinearPlant | SurfaceVessel | None) -> EstimationStage:
+    def _make_stage(self, plant: PlantModel | None) -> EstimationStage:
         cfg = self.config
         on, off = cfg.fault_threshold, cfg.fault_clear
         if cfg.mode is Mode.ORACLE:
@@ -175,6 +203,8 @@ class FtcapCore:
             w = None  # no sample: non-finite (or so large that its sum overflows)
         if self._unsized and isinstance(w, Observation) and w.finite():
             self._size_excitation(w.dt_s)
+        if self._lag is not None and isinstance(w, Observation):
+            u_sample = self._lag.mean_force(u_sample, w.dt_s)
         out = self.stage.update(w, u_sample, truth)
         delta, bf = out.delta_alloc, out.bf_alloc
         dead_ext = np.zeros(self.m, dtype=bool) if forced_dead is None else forced_dead

@@ -35,7 +35,7 @@ from ftcap_hil.core.estimator import (
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.kalman import KalmanEstimator
 from ftcap_hil.core.messages import BoolArray, FloatArray
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.vessel3dof import PlantModel
 
 
 @dataclass(frozen=True)
@@ -146,7 +146,7 @@ class WindowedStage:
     def __init__(
         self,
         estimator: WindowedEstimator | LiteralEstimator,
-        plant: LinearPlant | SurfaceVessel | None,
+        plant: PlantModel | None,
         fault_threshold: float,
         fault_clear: float,
     ) -> None:
@@ -195,7 +195,7 @@ class KalmanStage:
         B: FloatArray,
         scale: FloatArray,
         u_range: FloatArray,
-        plant: LinearPlant | SurfaceVessel,
+        plant: PlantModel,
         config: EstimatorConfig,
         fault_threshold: float,
         fault_clear: float,

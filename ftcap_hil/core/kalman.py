@@ -40,8 +40,9 @@ import numpy as np
 
 from ftcap_hil.core.estimator import Estimate, EstimatorConfig
 from ftcap_hil.core.messages import BoolArray, FloatArray
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.step_models import LinearStep, StepModel, VesselStep, inv_small, step_model
+from ftcap_hil.core.vessel3dof import PlantModel
+from ftcap_hil.core.wave_model import WaveModel
 
 # Re-exported: callers import the step models from here too.
 __all__ = [
@@ -74,7 +75,7 @@ class KalmanEstimator:
         self,
         B: FloatArray,
         scale: FloatArray,
-        plant: LinearPlant | SurfaceVessel,
+        plant: PlantModel,
         config: EstimatorConfig | None = None,
     ) -> None:
         self.config = cfg = config or EstimatorConfig()
@@ -86,7 +87,10 @@ class KalmanEstimator:
             raise ValueError(f"plant has {self._model.k} dynamic states, B has {self._k} rows")
         self._pinv = np.linalg.pinv(self._B)
         k, m = self._k, self._m
-        self._n = 2 * k + m
+        self._waves = self._wave_model()
+        self._nw = 2 * k if self._waves is not None else 0
+        self._theta_end = 2 * k + m  # z = [s, delta, b, wave states]
+        self._n = 2 * k + m + self._nw
         self._R = np.diag(np.square(self._measurement_std()))
         self._theta0_var = np.concatenate(
             [np.full(m, cfg.initial_delta_std**2), np.square(cfg.initial_bias_rel * self._scale)]
@@ -99,11 +103,12 @@ class KalmanEstimator:
         self._q_theta = np.concatenate(
             [np.full(m, cfg.q_delta**2), np.square(cfg.q_bias_rel * self._scale)]
         )
-        self._theta_diag = (np.arange(k, self._n), np.arange(k, self._n))
+        self._theta_diag = (np.arange(k, self._theta_end), np.arange(k, self._theta_end))
         self._IKH = np.eye(self._n)
         self._s_diag = (np.arange(k), np.arange(k))
-        self.z: FloatArray = np.concatenate([np.zeros(k), np.ones(m), np.zeros(k)])
-        self.P: FloatArray = np.diag(np.concatenate([np.ones(k), self._theta0_var]))
+        self.z: FloatArray = np.zeros(self._n)
+        self.P: FloatArray = np.zeros((self._n, self._n))
+        self.reset()
         self._started = False
         self._cusum = 0.0
         self._since_alarm = 10**9
@@ -116,6 +121,19 @@ class KalmanEstimator:
         self.suspect_weight: FloatArray = np.zeros(self._m)  # their posterior odds, sum 1
         self.q_scale = 1.0  # process-noise scale learnt from the innovations
 
+    def _wave_model(self) -> WaveModel | None:
+        cfg = self.config
+        if cfg.wave_period_s <= 0.0:
+            return None
+        std = cfg.wave_force_std
+        if std is None:
+            sigma = cfg.wave_force_rel * self._scale
+        else:
+            sigma = np.asarray(std, dtype=np.float64)
+            if sigma.shape != (self._k,):
+                raise ValueError(f"estimator.wave_force_std: expected {self._k} values, got {std}")
+        return WaveModel(2.0 * math.pi / cfg.wave_period_s, cfg.wave_damping, sigma)
+
     def _measurement_std(self) -> FloatArray:
         std = self.config.measurement_std
         if std is None:
@@ -127,11 +145,14 @@ class KalmanEstimator:
 
     def reset(self, delta: FloatArray | None = None, bf: FloatArray | None = None) -> None:
         """Back to the initial state (optionally with given parameters)."""
-        k, m = self._k, self._m
-        self.z = np.concatenate(
-            [np.zeros(k), np.ones(m) if delta is None else delta, np.zeros(k) if bf is None else bf]
-        )
-        self.P = np.diag(np.concatenate([np.ones(k), self._theta0_var]))
+        k, m, e = self._k, self._m, self._theta_end
+        self.z = np.zeros(self._n)
+        self.z[k : k + m] = 1.0 if delta is None else delta
+        self.z[k + m : e] = 0.0 if bf is None else bf
+        self.P = np.zeros((self._n, self._n))
+        self.P[:e, :e] = np.diag(np.concatenate([np.ones(k), self._theta0_var]))
+        if self._waves is not None:
+            self.P[e:, e:] = self._waves.stationary_cov()
         self._started = False
         self._cusum = 0.0
 
@@ -158,12 +179,11 @@ class KalmanEstimator:
         h = F[:k, k : k + m].copy()  # how each delta_i moved this sample's prediction
         info = np.einsum("ji,jl,li->i", h, S_inv, h)
         self.samples += 1
-        self._last_evidence = (e, h, F[:k, k + m :].copy(), S_inv)
+        self._last_evidence = (e, h, F[:k, k + m : self._theta_end].copy(), S_inv)
         self._evidence.append(self._last_evidence)
         alarm = self._change_detected(nis)
         if not alarm:
-            if self._since_alarm > m + k:
-                self._adapt(nis, dt_s)
+            self._adapt(nis, dt_s)
             self._correct(self.P[:, :k] @ S_inv, e)
             self._project()
             return self._output(nis, False, info)
@@ -181,8 +201,8 @@ class KalmanEstimator:
         self._project()
         out = self._output(nis, True, info)
         d = np.clip(fast[k : k + m], 0.0, 1.0)
-        fast_est = replace(out.estimate, delta_hat=d, bf_hat=fast[k + m :].copy(),
-                           f_hat=self._pinv @ fast[k + m :])  # fmt: skip
+        bf_fast = fast[k + m : self._theta_end].copy()
+        fast_est = replace(out.estimate, delta_hat=d, bf_hat=bf_fast, f_hat=self._pinv @ bf_fast)
         return replace(out, estimate=fast_est)
 
     def _correct(self, K: FloatArray, e: FloatArray) -> None:
@@ -217,18 +237,27 @@ class KalmanEstimator:
         np.clip(self.z[k : k + m], 0.0, 1.0, out=self.z[k : k + m])  # rounding only
 
     def _predict(self, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
-        k, m = self._k, self._m
-        s, delta, b = self.z[:k], self.z[k : k + m], self.z[k + m :]
+        k, m, e = self._k, self._m, self._theta_end
+        s, delta, b = self.z[:k], self.z[k : k + m], self.z[k + m : e]
         w = self._B @ (delta * u) + b
+        wave = self._waves.step(dt) if self._waves is not None else None
+        if wave is not None:
+            w = w + wave.mean @ self.z[e:]
         s1, A, G = self._model.predict(s, w, dt)
-        F = self._F  # identity outside the first k rows, which are rewritten each step
+        F = self._F  # identity outside the first k rows (and the wave block): rewritten
         F[:k, :k] = A
         F[:k, k : k + m] = G @ (self._B * u)
-        F[:k, k + m :] = G
+        F[:k, k + m : e] = G
+        if wave is not None:
+            F[:k, e:] = G @ wave.mean
+            F[e:, e:] = wave.phi
         P = F @ self.P @ F.T
         Gq = G * self._model_std
         P[:k, :k] += self.q_scale * (Gq @ Gq.T)
         P[self._theta_diag] += self._q_theta * dt
+        if wave is not None:
+            P[e:, e:] += wave.q
+            self.z[e:] = wave.phi @ self.z[e:]
         self.P = P
         self.z[:k] = s1
         return s1, F
@@ -237,12 +266,12 @@ class KalmanEstimator:
         """Scale the process noise so that the innovations have the size the filter expects
         (mean nis = k): smaller in a world the model matches, larger in a seaway or with a
         model error. A log-average, over the samples so far at first and then with the time
-        constant ``adapt_s``; each sample's ratio clipped to [0.1, 10], samples around a
+        constant ``adapt_s``; each sample's ratio clipped to [0.01, 100]; the sample of a
         change alarm left out."""
         cfg = self.config
         if cfg.adapt_s <= 0.0:
             return
-        ratio = min(max(nis / self._k, 0.1), 10.0)
+        ratio = min(max(nis / self._k, 0.01), 100.0)
         # 1/n at first (the scale settles within the first samples), then the time constant
         step = math.log(ratio) * min(1.0, max(dt_s / cfg.adapt_s, 1.0 / max(self.samples, 1)))
         self.q_scale = min(max(self.q_scale * math.exp(step), 1e-6), 1e6)
@@ -311,7 +340,7 @@ class KalmanEstimator:
     def _output(self, nis: float, alarm: bool, info: FloatArray) -> FilterOutput:
         k, m = self._k, self._m
         delta = self.z[k : k + m].copy()
-        bf = self.z[k + m :].copy()
+        bf = self.z[k + m : self._theta_end].copy()
         var = np.diag(self.P)[k : k + m].copy()
         est = Estimate(
             delta,
@@ -322,4 +351,5 @@ class KalmanEstimator:
             restarted=alarm,
             delta_std=np.sqrt(np.maximum(var, 0.0)),
         )
-        return FilterOutput(est, var, self.P[k + m :, k + m :].copy(), nis, alarm, info)
+        bias = slice(k + m, self._theta_end)
+        return FilterOutput(est, var, self.P[bias, bias].copy(), nis, alarm, info)

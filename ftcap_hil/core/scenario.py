@@ -16,9 +16,8 @@ from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.status import Mode
-from ftcap_hil.core.vessel3dof import Vessel3DOF
+from ftcap_hil.core.vessel3dof import PlantModel
 
 
 @dataclass(frozen=True)
@@ -41,7 +40,7 @@ class Scenario:
 
     name: str
     description: str
-    plant: LinearPlant | SurfaceVessel | Vessel3DOF
+    plant: PlantModel
     thrusters: ThrusterSet
     B: FloatArray  # (k, m)
     dt_s: float
@@ -61,6 +60,9 @@ class Scenario:
     # is ``plant`` itself integrated by ``integrator``.
     truth: Any = None
     length_m: float = math.nan  # the vessel's length overall (m), NaN: not stated
+    # Estimation samples this far apart (s), a multiple of dt_s (None: every step): over
+    # several wave periods the wave-frequency motion averages out of the evidence.
+    estimation_period_s: float | None = None
 
     @property
     def steps(self) -> int:

@@ -8,6 +8,7 @@ Jacobians the extended Kalman filter of :mod:`ftcap_hil.core.kalman` needs. Pure
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -15,6 +16,7 @@ import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.vessel3dof import PlantModel, Vessel3DOF
 
 
 class StepModel(Protocol):
@@ -73,12 +75,11 @@ class VesselStep:
 
     k = 3
 
-    def __init__(self, plant: SurfaceVessel) -> None:
+    def __init__(self, plant: SurfaceVessel | Vessel3DOF) -> None:
         self.plant = plant
         self._minv = np.asarray(np.linalg.inv(plant.mass_matrix), dtype=np.float64)
         self._inertia = np.diag(plant.mass_matrix).copy()
         self._euler = plant.inversion == "euler"
-        self._analytic = type(plant) is SurfaceVessel
 
     def dynamic_state(self, x: FloatArray) -> FloatArray:
         """nu = [u, v, r] (3,) from x = [north, east, psi, u, v, r]."""
@@ -86,8 +87,9 @@ class VesselStep:
 
     def _jacobian(self, nu: FloatArray, w: FloatArray, f0: FloatArray) -> FloatArray:
         """d nu_dot / d nu at nu (3 x 3)."""
-        if self._analytic:
-            p, (u, v, r) = self.plant, nu
+        p = self.plant
+        if isinstance(p, SurfaceVessel):  # the paper's vessel: analytic
+            u, v, r = nu
             m = p.mass_kg
             dn = np.array(
                 [
@@ -106,10 +108,26 @@ class VesselStep:
             jac[:, j] = (self.plant.nu_dot(nu_h, w) - f0) / h
         return jac
 
+    # Longest midpoint step ("trapezoid" models): a longer estimation interval (one that
+    # spans wave periods) is integrated in as many substeps, their Jacobians chained.
+    MAX_STEP_S = 0.25
+
     def predict(
         self, s0: FloatArray, w: FloatArray, dt: float
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """nu1 (3,) after ``dt`` s under the body wrench ``w`` (3,), with A (3, 3) and G (3, 3)."""
+        n = 1 if self._euler else max(1, math.ceil(dt / self.MAX_STEP_S - 1e-9))
+        if n == 1:
+            return self._one(s0, w, dt)
+        s, A, G = s0, np.eye(3), np.zeros((3, 3))
+        for _ in range(n):
+            s, a_i, g_i = self._one(s, w, dt / n)
+            A, G = a_i @ A, a_i @ G + g_i
+        return s, A, G
+
+    def _one(
+        self, s0: FloatArray, w: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
         f0 = self.plant.nu_dot(s0, w)
         j0 = self._jacobian(s0, w, f0)
         if self._euler:
@@ -154,7 +172,7 @@ def inv_small(a: FloatArray) -> FloatArray:
     return np.asarray(np.linalg.inv(a), dtype=np.float64)
 
 
-def step_model(plant: LinearPlant | SurfaceVessel) -> StepModel:
+def step_model(plant: PlantModel) -> StepModel:
     """The filter's view of a plant model."""
     if isinstance(plant, LinearPlant):
         return LinearStep(plant)

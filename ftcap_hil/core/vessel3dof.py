@@ -17,7 +17,7 @@ from functools import cached_property
 import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 
 DAMPING_KEYS = (
     "X_u", "Y_v", "Y_r", "N_v", "N_r", "X_uu", "X_uuu",
@@ -326,3 +326,7 @@ class Vessel3DOF:
         values = {k: getattr(self, k) * mass for k in inertia}
         values.update({k: getattr(self, k) * damping for k in DAMPING_KEYS})
         return replace(self, **values)
+
+
+# A plant model the allocator can be told: the paper's linear plant or vessel, or this one.
+PlantModel = LinearPlant | SurfaceVessel | Vessel3DOF

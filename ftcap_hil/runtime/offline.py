@@ -22,6 +22,8 @@ from ftcap_hil.core.plants import LinearPlant
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import Recorder, RunRecord
+from sim.sensors import Measurement
+from sim.truth import TruthModel
 
 
 def true_step(sc: Scenario, x: FloatArray, tau: FloatArray, dt: float | None = None) -> FloatArray:
@@ -65,6 +67,8 @@ def run_mode(
     sc = sc.with_mode(mode)
     core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, told_sensor_noise(sc).core, sc.plant)
     faults = FaultSchedule(sc.thrusters.m) if mode is Mode.NONE else sc.faults
+    if sc.truth is not None:
+        return _run_truth(sc, mode, core, faults, progress)
     rng = np.random.default_rng(sc.seed)
     noisy = bool(np.any(sc.noise_std > 0))
     rec = Recorder(sc, mode.value)
@@ -94,6 +98,68 @@ def run_mode(
         else:
             x = true_step(sc, x, tau)
     return rec.finish()
+
+
+def _steps(sc: Scenario, mode: Mode, progress: bool) -> Iterable[int]:
+    steps: Iterable[int] = range(sc.steps)
+    if progress:
+        from tqdm import tqdm
+
+        steps = tqdm(steps, desc=f"{sc.name} [{mode.value}]", unit="step", leave=False)
+    return steps
+
+
+def _run_truth(
+    sc: Scenario, mode: Mode, core: FtcapCore, faults: FaultSchedule, progress: bool
+) -> RunRecord:
+    """The closed loop on a realistic truth (sim/truth.py): the controller and the core see
+    the sensor's latest delivered odometry; the truth advances over each control period
+    with the command held, split at every fault change inside it (exact fault timing)."""
+    model = TruthModel(sc.truth, sc.x0)
+    rec = Recorder(sc, mode.value)
+    every = max(1, round((sc.estimation_period_s or sc.dt_s) / sc.dt_s))
+    latest = model.start()[-1]
+    used: Measurement | None = None
+    u_sum, u_time = np.zeros(sc.thrusters.m), 0.0
+    for k in _steps(sc, mode, progress):
+        t = k * sc.dt_s
+        x_meas = np.concatenate([latest.eta, latest.nu])
+        w, u_mean = None, None
+        if k % every == 0 and latest is not used:
+            if used is not None and u_time > 0.0:
+                x_prev = np.concatenate([used.eta, used.nu])
+                w = Observation(x_prev, x_meas, latest.t_measured_s - used.t_measured_s)
+                u_mean = u_sum / u_time  # the command's mean over the estimation interval
+            used, u_sum, u_time = latest, np.zeros(sc.thrusters.m), 0.0
+        ref = sc.reference_at(t)
+        tau_d = sc.controller(x_meas, ref)
+        truth = faults.at(t).effective(model.shaft_thrust)
+        x_true = model.x
+        t0 = time.perf_counter()
+        res = core.step(tau_d, w, truth, u_sample=u_mean)
+        elapsed = time.perf_counter() - t0
+        produced, tau, delivered = _advance(model, faults, res.u, t, sc.dt_s)
+        u_sum, u_time = u_sum + res.u * sc.dt_s, u_time + sc.dt_s
+        latest = delivered[-1] if delivered else latest
+        rec.add(t, x_true, ref, tau_d, tau, res, produced, truth, elapsed)
+    return rec.finish()
+
+
+def _advance(
+    model: TruthModel, faults: FaultSchedule, u: FloatArray, t: float, dt: float
+) -> tuple[FloatArray, FloatArray, list[Measurement]]:
+    """One control period of the truth, split at the fault changes inside it; the means of
+    the produced forces and of the wrench over the period, and the odometry delivered."""
+    cuts = [c for c in faults.change_times() if t < c < t + dt]
+    edges = [t, *cuts, t + dt]
+    produced, tau = np.zeros(u.shape), np.zeros(3)
+    delivered: list[Measurement] = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        step = model.step(u, faults.at(a), b - a)
+        produced += step.produced * ((b - a) / dt)
+        tau += step.tau * ((b - a) / dt)
+        delivered += step.measurements
+    return produced, tau, delivered
 
 
 def run_modes(

@@ -16,8 +16,9 @@ weights it (docs/decisions.md).
 
 Odometry carries the sim time in ``Odometry.time_s``. Configuration: the shipped
 ``ftcap_hil/data/hil/vessel.toml`` (or ``--config``) plus ``--set SECTION.KEY=VALUE``.
-SIGINT/SIGTERM end the run cleanly (exit 0). ``--record FILE.csv`` writes one row per
-telemetry sample: true state, commands, produced forces and true faults.
+SIGINT/SIGTERM end the run cleanly (exit 0); a second one ends it at once (exit 130).
+``--record FILE.csv`` writes one row per telemetry sample: true state, commands, produced
+forces and true faults.
 """
 
 from __future__ import annotations
@@ -27,9 +28,6 @@ import csv
 import json
 import logging
 import math
-import signal
-import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
@@ -39,7 +37,11 @@ import numpy as np
 from ftcap_hil.core.errors import ConfigError, PortError
 from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, Odometry, ThrusterCommand
+from ftcap_hil.core.status import Severity
 from ftcap_hil.ports.mailbox import Stamped
+from ftcap_hil.runtime.loop import DeadlineLoop
+from ftcap_hil.runtime.signals import capture_signals
+from ftcap_hil.runtime.transitions import TransitionLog, log_to
 from sim.vessel import (
     Decimator,
     SimSample,
@@ -227,7 +229,8 @@ MAX_CATCH_UP_STEPS = 5  # a late step integrates at most this many nominal steps
 
 
 class VesselProcess:
-    """startup -> steps on absolute deadlines -> shutdown (ports closed, handlers restored)."""
+    """startup -> steps on absolute deadlines (:class:`DeadlineLoop`) -> shutdown; the first
+    SIGINT/SIGTERM ends the run after its step, a second one at once (``ForcedExit``)."""
 
     def __init__(
         self,
@@ -243,47 +246,31 @@ class VesselProcess:
         self.duration_s = duration_s
         self.period_ns = int(1e9 / cfg.shell.rate_hz)
         self.dt_s = cfg.shell.realtime_factor / cfg.shell.rate_hz
+        self.loop = DeadlineLoop(self.period_ns)
         self.steps = 0
-        self.overruns = 0
         self.lost_s = 0.0  # sim time not integrated: stalls longer than MAX_CATCH_UP_STEPS
         self._last_step_ns: int | None = None
-        self.should_exit = False
-        self._wake = threading.Event()
         self._telemetry = Decimator(cfg.shell.rate_hz, cfg.shell.telemetry_rate_hz)
         self._esc = Decimator(cfg.shell.rate_hz, cfg.shell.esc_status_rate_hz)
         self._command_stamp = -1
+        self._transitions = TransitionLog(log_to(log))
         m = self.sim.m
-        self._shown: dict[str, Any] = {"fresh": False, "delta": np.ones(m), "f": np.zeros(m)}
-        self._shown["silent"] = np.zeros(m, dtype=bool)
-        self._saved: dict[int, Any] = {}
+        self._true_fault = (np.ones(m), np.zeros(m))  # (delta, f) last logged
 
     def request_exit(self, *_: object) -> None:
-        self.should_exit = True
-        self._wake.set()
+        """End the run after the current step (any thread, signal-handler safe)."""
+        self.loop.request_exit()
 
     def run(self) -> int:
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._saved[sig] = signal.signal(sig, self.request_exit)
+        """Step until stopped or ``duration_s`` of sim time; the exit code (0)."""
         try:
-            deadline = time.monotonic_ns()
-            while not self.should_exit and not self._done():
-                self.step(time.monotonic_ns())
-                deadline += self.period_ns
-                late = time.monotonic_ns() - deadline
-                if late > 0:  # skip the deadlines this step ran past, keep the phase
-                    missed = late // self.period_ns + 1
-                    self.overruns += int(missed)
-                    deadline += int(missed) * self.period_ns
-                self._wake.wait((deadline - time.monotonic_ns()) * 1e-9)
+            with capture_signals(self.loop.request_exit):
+                self.loop.run(self.step, until=self._done)
         finally:
-            for signum, handler in self._saved.items():
-                signal.signal(signum, handler)
-            self._saved.clear()
-        log.info(
-            "stopped at sim time %.2f s after %d steps (%d overruns, %.2f s lost to stalls)",
-            self.sim.t_s, self.steps, self.overruns, self.lost_s,
-        )  # fmt: skip
+            log.info(
+                "stopped at sim time %.2f s after %d steps (%d overruns, %.2f s lost to stalls)",
+                self.sim.t_s, self.steps, self.loop.stats.overruns, self.lost_s,
+            )  # fmt: skip
         return 0
 
     def _done(self) -> bool:
@@ -337,20 +324,27 @@ class VesselProcess:
         log.info("fault injected via %s: %s", source, what)
 
     def _log_transitions(self, s: SimSample) -> None:
-        shown = self._shown
-        if s.command_fresh != shown["fresh"]:
-            shown["fresh"] = s.command_fresh
-            if s.command_fresh:
-                log.info("thruster commands received")
-            else:
-                log.warning("no thruster command for %.2f s: thrusters at zero", s.command_age_s)
+        self._transitions.update(
+            "command",
+            bool(s.command_fresh),
+            "thruster commands received",
+            f"no thruster command for {s.command_age_s:.2f} s: thrusters at zero",
+            severity=Severity.INFO,
+            off_severity=Severity.WARNING,
+        )
         names = self.cfg.sim.thrusters.names
-        for i in np.flatnonzero((s.delta != shown["delta"]) | (s.f != shown["f"])):
+        delta, f = self._true_fault
+        for i in np.flatnonzero((s.delta != delta) | (s.f != f)):
             log.warning(
                 "t = %.2f s: thruster %s true fault delta %.2f -> %.2f, f %.4f -> %.4f N",
-                s.t_s, names[i], shown["delta"][i], s.delta[i], shown["f"][i], s.f[i],
+                s.t_s, names[i], delta[i], s.delta[i], f[i], s.f[i],
             )  # fmt: skip
-        for i in np.flatnonzero(s.silent != shown["silent"]):
-            log.warning("t = %.2f s: ESC %s %s", s.t_s, names[i],
-                        "silent" if s.silent[i] else "reporting again")  # fmt: skip
-        shown["delta"], shown["f"], shown["silent"] = s.delta, s.f, s.silent
+        self._true_fault = (s.delta, s.f)
+        for name, silent in zip(names, s.silent, strict=True):
+            self._transitions.update(
+                f"silent:{name}",
+                bool(silent),
+                f"t = {s.t_s:.2f} s: ESC {name} silent",
+                f"t = {s.t_s:.2f} s: ESC {name} reporting again",
+                off_severity=Severity.WARNING,
+            )

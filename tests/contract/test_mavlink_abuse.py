@@ -22,15 +22,13 @@ from bridges.mavlink.config import ALLOCATOR_IDS, MavlinkEndpoint
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.peers import TrafficLimits
 from tests.contract.mavlink_abuse import Pinger, flood, rss_bytes, udp_drops
-from tests.contract.test_mavlink_support import (
+from tests.contract.mavlink_support import (
     RawPeer,
     free_udp_ports,
-    no_leaked_threads,
     wait_until,
 )
 
 pytestmark = [pytest.mark.timeout(120), pytest.mark.usefixtures("no_leaked_threads")]
-__all__ = ["no_leaked_threads"]
 
 SYS, COMP = ALLOCATOR_IDS
 PARAMS = [

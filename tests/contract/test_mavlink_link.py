@@ -21,10 +21,9 @@ from bridges.mavlink.config import (
 )
 from bridges.mavlink.link import MavlinkPort, Route
 from ftcap_hil.core.errors import MalformedMessage
-from tests.contract.test_mavlink_support import RawPeer, free_udp_ports, no_leaked_threads
+from tests.contract.mavlink_support import RawPeer, free_udp_ports
 
 pytestmark = [pytest.mark.timeout(30)]
-__all__ = ["no_leaked_threads"]
 
 
 def test_default_topology_is_loopback_with_distinct_inboxes() -> None:

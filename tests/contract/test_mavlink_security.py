@@ -24,17 +24,15 @@ from bridges.mavlink.vessel import (
     MAV_CMD_INJECT_FAILURE,
     MavlinkVesselLink,
 )
-from tests.contract.test_mavlink_support import (
+from tests.contract.mavlink_support import (
     DIALECT,
     RawPeer,
     free_udp_ports,
-    no_leaked_threads,
     send_datagram,
     wait_until,
 )
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.usefixtures("no_leaked_threads")]
-__all__ = ["no_leaked_threads"]
 
 SYS, COMP = ALLOCATOR_IDS
 PASSPHRASE = "correct horse battery staple"

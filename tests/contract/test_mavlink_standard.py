@@ -25,17 +25,15 @@ from bridges.mavlink.vessel import (
 )
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.messages import FaultKind, Odometry
-from tests.contract.test_mavlink_support import (
+from tests.contract.mavlink_support import (
     DIALECT,
     RawPeer,
     free_udp_ports,
-    no_leaked_threads,
     param_number,
     wait_until,
 )
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.usefixtures("no_leaked_threads")]
-__all__ = ["no_leaked_threads"]
 
 
 def _bits(i: int) -> float:

@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 
 from tests.contract.mavlink_abuse import Pinger
-from tests.contract.test_mavlink_support import RawPeer
-from tests.e2e.conftest import Rig, wait_until
+from tests.contract.mavlink_support import RawPeer
+from tests.e2e.rig import Rig, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(240)]
 

@@ -14,7 +14,7 @@ from ftcap_hil.core.allocator import AllocationStatus, Allocator, AllocatorConfi
 from ftcap_hil.core.estimator import wrench_scale
 from ftcap_hil.core.geometry import ThrusterSet, command_bounds, effectiveness, paper_four_thrusters
 from ftcap_hil.core.qp import BoxQpSolution, available_backends
-from tests.unit.test_geometry import six_thrusters
+from tests.unit.support import six_thrusters
 
 DT_S = 0.1
 VESSELS = {"paper4": paper_four_thrusters, "six": six_thrusters}

@@ -58,7 +58,7 @@ def test_a_weak_and_biased_thruster_is_identified_with_a_shrinking_variance() ->
     np.testing.assert_allclose(est.delta_hat, delta, atol=0.01)
     np.testing.assert_allclose(est.bf_hat, B @ f, atol=2e-4)
     assert est.delta_std is not None and np.all(est.delta_std < 0.05)
-    assert outs[-1].estimate.delta_std[1] < outs[5].estimate.delta_std[1]  # it learnt
+    assert outs[-1].estimate.delta_std[1] < 0.1 * outs[0].estimate.delta_std[1]  # it learnt
 
 
 def test_an_onset_raises_one_alarm_and_the_suspect_is_the_faulty_thruster() -> None:

@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import itertools
+import logging
 import os
 import signal
+import sys
+import threading
 
 import pytest
 
 from ftcap_hil.core.status import Severity
-from ftcap_hil.runtime.loop import DeadlineLoop
+from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
 from ftcap_hil.runtime.signals import ForcedExit, capture_signals
-from ftcap_hil.runtime.transitions import TransitionLog
+from ftcap_hil.runtime.transitions import TransitionLog, log_to
 
 
 class FakeClock:
@@ -101,3 +105,80 @@ def test_transitions_are_announced_once_each_way() -> None:
         (Severity.INFO, "x on"),
     ]
     assert log["x"] is False and log["never"] is False
+
+
+def test_forced_exit_is_raised_once_and_never_inside_a_shield() -> None:
+    stops: list[str] = []
+    with capture_signals(lambda: stops.append("stop")) as cap:
+        os.kill(os.getpid(), signal.SIGTERM)
+        with cap.shielded():  # the final zero going out: a second signal does not cut it
+            os.kill(os.getpid(), signal.SIGINT)
+        assert len(cap.received) == 2 and not cap.forced
+    with pytest.raises(ForcedExit), capture_signals(lambda: None) as cap:
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            os.kill(os.getpid(), signal.SIGTERM)
+        finally:
+            os.kill(os.getpid(), signal.SIGTERM)  # while forcing: counted, not raised again
+            assert cap.forced and len(cap.received) == 3
+    assert stops == ["stop"]
+
+
+def test_on_force_is_called_instead_of_raising() -> None:
+    calls: list[str] = []
+    with capture_signals(lambda: calls.append("stop"), on_force=lambda: calls.append("force")):
+        for _ in range(3):
+            os.kill(os.getpid(), signal.SIGINT)
+    assert calls == ["stop", "force"]
+
+
+def test_no_capture_outside_the_main_thread() -> None:
+    before = signal.getsignal(signal.SIGINT)
+    seen: list[object] = []
+
+    def other() -> None:
+        with capture_signals(lambda: None) as cap:
+            seen.append(signal.getsignal(signal.SIGINT))
+            seen.append(cap.stopping)
+
+    t = threading.Thread(target=other)
+    t.start()
+    t.join()
+    assert seen == [before, False]
+
+
+def test_a_mailbox_handed_the_wake_event_wakes_a_real_loop() -> None:
+    loop = DeadlineLoop(period_ns=10 * 10**9)  # a 10 s period: only a wake-up ticks again
+    box: Mailbox[int] = Mailbox("x", notify=loop.wake_event)
+    ticks: list[int] = []
+
+    def tick(now: int) -> None:
+        ticks.append(now)
+        if len(ticks) == 2:
+            loop.request_exit()
+
+    t = threading.Thread(target=loop.run, args=(tick,))
+    t.start()
+    box.put(1)
+    t.join(5.0)
+    assert not t.is_alive() and len(ticks) == 2
+    assert loop.stats.ticks == 1 and loop.stats.wake_ticks == 1
+
+
+def test_fast_thread_switch_restores_the_interval() -> None:
+    before = sys.getswitchinterval()
+    with pytest.raises(RuntimeError), fast_thread_switch(1e-4):
+        assert sys.getswitchinterval() == pytest.approx(1e-4)
+        raise RuntimeError
+    assert sys.getswitchinterval() == before
+
+
+def test_off_severity_and_the_logger_announce(caplog: pytest.LogCaptureFixture) -> None:
+    log = TransitionLog(log_to(logging.getLogger("t")))
+    with caplog.at_level(logging.INFO, logger="t"):
+        log.update("silent", True, "ESC 1 silent")
+        log.update("silent", False, "ESC 1 silent", "ESC 1 back", off_severity=Severity.WARNING)
+    assert [(r.levelno, r.message) for r in caplog.records] == [
+        (logging.WARNING, "ESC 1 silent"),
+        (logging.WARNING, "ESC 1 back"),
+    ]

@@ -14,7 +14,7 @@ from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.geometry import effectiveness
 from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.status import Mode
-from tests.unit.test_geometry import EQ22_L03
+from tests.unit.support import EQ22_L03
 
 BASE = """
 [scenario]

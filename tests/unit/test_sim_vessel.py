@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -347,3 +350,37 @@ def test_a_late_step_integrates_the_steps_it_missed_up_to_the_cap() -> None:
     proc.step(4305 * ms)  # a 3 s stall: MAX_CATCH_UP_STEPS nominal steps, the rest lost
     assert proc.sim.t_s == pytest.approx((4 + MAX_CATCH_UP_STEPS) * nominal)
     assert proc.lost_s == pytest.approx((30 - MAX_CATCH_UP_STEPS) * nominal)
+
+
+class _CountingPorts(_NoPorts):
+    def __init__(self) -> None:
+        self.odometry = 0
+
+    def send_odometry(self, odom: object) -> None:
+        self.odometry += 1
+
+
+def test_the_process_loop_runs_for_its_sim_duration() -> None:
+    cfg = load_config(None, ["sim.rate_hz=100.0", "sim.realtime_factor=10.0"])
+    ports = _CountingPorts()
+    proc = VesselProcess(cfg, ports, duration_s=2.0)  # type: ignore[arg-type]
+    assert proc.run() == 0
+    nominal = 10.0 / 100.0
+    t_s = proc.sim.t_s  # about 0.2 s of wall time; a late last step may overshoot
+    assert 2.0 - 1e-9 <= t_s < 2.0 + MAX_CATCH_UP_STEPS * nominal
+    assert t_s / nominal == pytest.approx(round(t_s / nominal), abs=1e-6)  # on the grid
+    assert proc.steps <= 20 and ports.odometry > 0  # late steps integrate several nominal ones
+
+
+def test_sigterm_ends_the_process_loop_and_restores_the_handler() -> None:
+    cfg = load_config(None, ["sim.rate_hz=50.0"])
+    proc = VesselProcess(cfg, _NoPorts())  # type: ignore[arg-type]
+    before = signal.getsignal(signal.SIGTERM)
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM))
+    timer.start()
+    try:
+        assert proc.run() == 0
+    finally:
+        timer.cancel()
+    assert proc.loop.should_exit and proc.steps > 0
+    assert signal.getsignal(signal.SIGTERM) is before

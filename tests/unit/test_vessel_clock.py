@@ -1,4 +1,5 @@
-"""VesselClock: telemetry receipt stamps corrected for their variable delay (no processes)."""
+"""VesselClock and the estimation sampler: telemetry receipt stamps corrected for their
+variable delay, commands averaged over the interval the states span (no processes)."""
 
 from __future__ import annotations
 
@@ -6,12 +7,8 @@ import math
 
 import numpy as np
 
-from ftcap_hil.core.cycle import CoreConfig
-from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.messages import Odometry
-from ftcap_hil.core.plants import SurfaceVessel
-from ftcap_hil.runtime.daemon import AllocatorDaemon, DaemonConfig, Ports, VesselClock
-from tests.unit.test_daemon_esc import NullSink
+from ftcap_hil.runtime.estimation import EstimationSampler, VesselClock
 
 MS = 1_000_000  # ns
 OFFSET_NS = 7_000 * MS  # this clock minus the vessel's
@@ -55,26 +52,18 @@ def test_a_vessel_clock_running_slow_or_without_time_falls_back_to_receipt() -> 
     assert clock.map(math.nan, 123) == 123
 
 
-def _daemon(vessel_clock: bool) -> AllocatorDaemon:
-    ths = paper_four_thrusters()
-    cfg = DaemonConfig(
-        ths, effectiveness(ths), SurfaceVessel(), CoreConfig(), vessel_clock=vessel_clock
-    )
-    return AllocatorDaemon(cfg, Ports([], [], NullSink(), []))
-
-
 def _mean_command_error(vessel_clock: bool) -> float:
-    """Largest error of the daemon's command average against the one over the interval
+    """Largest error of the sampler's command average against the one over the interval
     the vessel's states really span (commands change every 0.1 s, telemetry every 0.1 s,
     a 0.3 s estimation period, 5-150 ms telemetry delay)."""
-    d = _daemon(vessel_clock)
+    d = EstimationSampler(period_s=0.2827, use_vessel_clock=vessel_clock)
     rng = np.random.default_rng(2)
     commands = rng.uniform(-0.1, 0.1, (400, 4))
     delays = _delays(300, seed=3)
     worst, prev_t = 0.0, None
 
     def send(j: int) -> None:  # command j goes out at 0.1 j + 0.05 s of our clock
-        d._history.add(OFFSET_NS + j * 100 * MS + 50 * MS, commands[j])
+        d.command_sent(OFFSET_NS + j * 100 * MS + 50 * MS, commands[j])
 
     send(0)
     send(1)
@@ -83,17 +72,18 @@ def _mean_command_error(vessel_clock: bool) -> float:
         t_s = 0.1 * k
         odom = Odometry.checked([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], t_s)
         rx = OFFSET_NS + k * 100 * MS + int(delays[k])
-        w, u_mean = d._estimation_sample(odom, rx)
-        if u_mean is None:
+        got = d.sample(odom, rx)
+        if got is None:
             continue
+        u_mean = got.u_mean
         if prev_t is not None and k > 60:  # after the filter's window has filled
-            want = d._history.mean(OFFSET_NS + int(prev_t * 1e9), OFFSET_NS + k * 100 * MS)
+            want = d.history.mean(OFFSET_NS + int(prev_t * 1e9), OFFSET_NS + k * 100 * MS)
             worst = max(worst, float(np.abs(u_mean - want).max()))
         prev_t = t_s
     return worst
 
 
-def test_the_daemon_averages_commands_over_the_interval_the_states_span() -> None:
+def test_the_sampler_averages_commands_over_the_interval_the_states_span() -> None:
     by_receipt, by_vessel = _mean_command_error(False), _mean_command_error(True)
     # Receipt stamps misplace the interval by up to the delay jitter: a large share of a
     # command change. The least-delay offset leaves the least delay (5 ms of 300).

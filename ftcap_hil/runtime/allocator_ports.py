@@ -1,0 +1,153 @@
+"""How the allocator daemon's ports are opened from its configuration: CAN (thruster
+commands out, ESC status in), MAVLink and Zenoh (setpoints and telemetry in, status out).
+
+The bridges are imported here, lazily, so that building the ``ftcap-hil`` parser does not
+import the networking stacks. Everything opened is entered into the caller's ``ExitStack``
+and closes, newest first, when it closes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.messages import EscStatus
+from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
+from ftcap_hil.runtime.daemon import DaemonConfig, Ports
+
+
+class AllocatorSettings(Protocol):
+    """What the wiring reads: the daemon's settings and the merged TOML's bridge tables
+    (``config.daemon.LoadedConfig`` is one)."""
+
+    @property
+    def daemon(self) -> DaemonConfig: ...
+    @property
+    def raw(self) -> dict[str, Any]: ...
+    @property
+    def source(self) -> str: ...
+
+
+def _section(cfg: AllocatorSettings, name: str) -> dict[str, Any]:
+    """A copy of the bridge table ``name`` ({} if absent)."""
+    table = cfg.raw.get(name, {})
+    if not isinstance(table, dict):
+        raise ConfigError(f"{cfg.source}.{name}: expected a table")
+    return dict(table)
+
+
+def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, Any]:
+    """The CAN bus, the thruster sink on it (zero on close) and the ESC status source
+    (None with ``[can] esc_monitor = false``)."""
+    from bridges.can_io.adapters import CanEscStatusSource, CanThrusterSink
+    from bridges.can_io.bus import open_can_bus
+    from bridges.can_io.force_map import ForceRawMap
+
+    c = _section(cfg, "can")
+    ths = cfg.daemon.thrusters
+    bus = stack.enter_context(
+        open_can_bus(str(c.get("interface", "canhub")), str(c.get("channel", "127.0.0.1:29536")))
+    )
+    fmap = ForceRawMap.from_limits(ths.u_min, ths.u_max, float(c.get("deadband_n", 0.0)))
+    sink = stack.enter_context(
+        CanThrusterSink(bus, fmap, node_id=int(c.get("node_id", 10)), zero_on_shutdown=True)
+    )
+    esc_ids = c.get("esc_node_ids")
+    esc = None
+    if c.get("esc_monitor", True):
+        esc = stack.enter_context(CanEscStatusSource(bus, ths.m, esc_node_ids=esc_ids))
+    return sink, esc
+
+
+def _latest_of(esc: Any) -> Callable[[], list[EscStatus | None]]:
+    """The latest ``EscStatus`` per thruster of a ``CanEscStatusSource`` (None: never)."""
+
+    def latest() -> list[EscStatus | None]:
+        return [None if (slot := box.latest()) is None else slot.value for box in esc.mailboxes]
+
+    return latest
+
+
+def build_ports(
+    cfg: AllocatorSettings,
+    stack: contextlib.ExitStack,
+    cmd_log: CommandLog | None,
+) -> tuple[Ports, Any]:
+    """The daemon's ports from ``cfg``'s [can], [mavlink] and [zenoh] tables, and the
+    MAVLink parameter server (None without MAVLink)."""
+    sink, esc = open_can(cfg, stack)
+    ports = Ports(
+        setpoints=[],
+        telemetry=[],
+        thrusters=LoggedSink(sink, cfg.daemon.thrusters.m, cmd_log),
+        esc_ages=esc.ages_s if esc is not None else None,
+        esc_latest=_latest_of(esc) if esc is not None else None,
+    )
+    params = open_mavlink(cfg, stack, ports)
+    open_zenoh(cfg, stack, ports)
+    return ports, params
+
+
+def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports) -> Any:
+    """MAVLink setpoints, manual input, odometry and status onto ``ports`` (unless
+    ``[mavlink] enabled = false``); the link's parameter server, or None."""
+    mav_cfg = _section(cfg, "mavlink")
+    if not mav_cfg.pop("enabled", True):
+        return None
+    from bridges.mavlink import allocator as mav
+    from bridges.mavlink.allocator_params import allocator_param_specs
+    from bridges.mavlink.config import MavlinkEndpoint, default_allocator_endpoint
+    from bridges.mavlink.status import MavlinkStatusSink
+
+    d = cfg.daemon
+    max_wrench = tuple(mav_cfg.pop("max_wrench", (0.3, 0.3, 0.06)))
+    limit = mav_cfg.pop("wrench_limit", None)
+    endpoint = MavlinkEndpoint.from_mapping("mavlink", mav_cfg, default_allocator_endpoint())
+    link = stack.enter_context(
+        mav.MavlinkAllocatorLink(
+            mav.AllocatorLinkConfig(
+                cfg.daemon.thrusters.m, max_wrench, None if limit is None else tuple(limit)
+            ),
+            endpoint,
+            allocator_param_specs(
+                d.core,
+                d.setpoint_timeout_s,
+                d.telemetry_timeout_s,
+                d.esc_timeout_s,
+                d.rate_hz,
+                float(np.max(d.thrusters.u_max)),
+            ),
+        )
+    )
+    ports.setpoints += [link.setpoint, link.manual]
+    ports.telemetry.append(link.odometry)
+    ports.status.append(MavlinkStatusSink(link))
+    return link.params
+
+
+def open_zenoh(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports) -> None:
+    """The Zenoh router session's setpoints, odometry and status onto ``ports`` (unless
+    ``[zenoh] enabled = false``)."""
+    z_cfg = _section(cfg, "zenoh")
+    if not z_cfg.pop("enabled", True):
+        return
+    from bridges.zenoh_io import config as zenoh_config
+    from bridges.zenoh_io import link as zenoh_link
+    from bridges.zenoh_io.status import ZenohStatusSink
+
+    conf_name = str(z_cfg.get("config", "allocator.json5"))
+    path = Path(conf_name)
+    if not path.exists():
+        path = zenoh_config.shipped_config_path(conf_name.removesuffix(".json5"))
+    conf = zenoh_link.load_config(path, list(z_cfg.get("overrides", [])))
+    zl = stack.enter_context(
+        zenoh_link.ZenohAllocatorLink(str(z_cfg.get("vessel", "ftcap1")), conf)
+    )
+    ports.setpoints.append(zl.setpoints)
+    ports.telemetry.append(zl.odometry)
+    ports.status.append(ZenohStatusSink(zl))

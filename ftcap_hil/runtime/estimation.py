@@ -1,0 +1,150 @@
+"""The estimator's samples: the plant's state at both ends of an interval and the mean command
+over the same interval.
+
+Once per ``estimation_period_s`` of telemetry, :class:`EstimationSampler` pairs two odometry
+samples ``x0 = [eta, nu]`` and ``x1`` (NED pose, body velocities) ``dt`` apart, as a core
+:class:`~ftcap_hil.core.estimation.Observation`, with the time-weighted mean of the commands
+the thrusters had over that interval (from a :class:`CommandHistory` of what was sent, with
+its stamps). The command interval is found on this process's clock: the receipt stamps,
+corrected by :class:`VesselClock` for the telemetry's variable delay.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import NamedTuple
+
+import numpy as np
+
+from ftcap_hil.core.estimation import Observation
+from ftcap_hil.core.messages import FloatArray, Odometry
+
+
+class CommandHistory:
+    """Commands with the time they went out, to average u over a telemetry interval."""
+
+    def __init__(self, horizon_s: float) -> None:
+        self._items: deque[tuple[int, FloatArray]] = deque()
+        self._horizon_ns = int(horizon_s * 1e9)
+
+    def add(self, stamp_ns: int, u: FloatArray) -> None:
+        """Command ``u`` (m,) in N went out at ``stamp_ns``; older ones beyond the horizon go."""
+        self._items.append((stamp_ns, u))
+        while len(self._items) > 2 and self._items[1][0] < stamp_ns - self._horizon_ns:
+            self._items.popleft()
+
+    def mean(self, t0_ns: int, t1_ns: int) -> FloatArray | None:
+        """Time-weighted mean (m,) of the piecewise-constant command over [t0, t1]; None if
+        the interval is empty or starts before the oldest command kept."""
+        if t1_ns <= t0_ns or not self._items or self._items[0][0] > t0_ns:
+            return None
+        acc, total = None, 0
+        items = list(self._items)
+        for i, (start, u) in enumerate(items):
+            end = items[i + 1][0] if i + 1 < len(items) else t1_ns
+            lo, hi = max(start, t0_ns), min(end, t1_ns)
+            if hi > lo:
+                acc = u * (hi - lo) if acc is None else acc + u * (hi - lo)
+                total += hi - lo
+        return None if acc is None else acc / total
+
+
+class VesselClock:
+    """Receipt stamps of telemetry corrected for their variable delay.
+
+    A state measured at vessel time ``t`` (``Odometry.time_s``) reaches this process after a
+    delay: the vessel's own computing, transport, this process's scheduling. Only the
+    variable part matters to the command average (a constant one shifts every interval
+    alike). The least-delayed sample of the last ``window`` gives the clock offset, as in
+    NTP's minimum filter or PX4's timesync: ``mapped = t + min(receipt - t)``.
+
+    The mapping assumes the vessel's clock runs at this clock's rate. It is not used (the
+    receipt stamp is) while it would move a stamp back by more than ``max_shift_s``: a
+    vessel clock running slower (a sim below real time), a jump, or a restart. Vessel time
+    going backwards restarts the filter.
+    """
+
+    def __init__(self, window: int = 50, max_shift_s: float = 0.25) -> None:
+        self._offsets: deque[int] = deque(maxlen=window)
+        self._last_t_ns: int | None = None
+        self._max_shift_ns = int(max_shift_s * 1e9)
+
+    def map(self, vessel_time_s: float, receipt_ns: int) -> int:
+        """The receipt stamp corrected to the least-delayed offset (class docstring)."""
+        if not math.isfinite(vessel_time_s):
+            return receipt_ns
+        t_ns = int(round(vessel_time_s * 1e9))
+        if self._last_t_ns is not None and t_ns < self._last_t_ns:
+            self._offsets.clear()
+        self._last_t_ns = t_ns
+        self._offsets.append(receipt_ns - t_ns)
+        mapped = t_ns + min(self._offsets)
+        return mapped if receipt_ns - mapped <= self._max_shift_ns else receipt_ns
+
+
+class EstimationSample(NamedTuple):
+    """The states at both ends of an interval (``observation``, vessel-clock ``dt_s``) and the
+    mean command ``u_mean`` (m,) in N over it."""
+
+    observation: Observation
+    u_mean: FloatArray
+
+
+class _Point(NamedTuple):
+    receipt_ns: int
+    odom: Odometry
+    at_ns: int  # the stamp that times the command average
+
+
+class EstimationSampler:
+    """Pairs telemetry with the commands sent (module docstring).
+
+    ``use_vessel_clock``: time the command average by :class:`VesselClock` (else by the
+    receipt stamps).
+    """
+
+    def __init__(self, period_s: float, use_vessel_clock: bool) -> None:
+        self.period_s = period_s
+        self.use_vessel_clock = use_vessel_clock
+        self.history = CommandHistory(horizon_s=10 * period_s + 5.0)
+        self._clock = VesselClock()
+        self._clock_fed = (-1, -1)  # (receipt stamp, mapped stamp) of the last odometry
+        self._last: _Point | None = None
+
+    def command_sent(self, stamp_ns: int, u: FloatArray) -> None:
+        """Command ``u`` (m,) in N went to the thrusters at ``stamp_ns``."""
+        self.history.add(stamp_ns, u)
+
+    def sample(self, odom: Odometry | None, receipt_ns: int) -> EstimationSample | None:
+        """A sample when the latest telemetry (``odom`` received at ``receipt_ns``) closes an
+        interval of at least 0.9 estimation periods since the last one; None in between."""
+        if odom is None:
+            return None
+        if receipt_ns != self._clock_fed[0]:
+            mapped = (
+                self._clock.map(odom.time_s, receipt_ns) if self.use_vessel_clock else receipt_ns
+            )
+            self._clock_fed = (receipt_ns, mapped)
+        point = _Point(receipt_ns, odom, self._clock_fed[1])
+        prev = self._last
+        if prev is None:
+            self._last = point
+            return None
+        if receipt_ns == prev.receipt_ns:
+            return None
+        # The interval is measured on the vessel's clock when telemetry carries it: receipt
+        # stamps jitter, and a threshold on them skips samples whenever the telemetry period
+        # equals the estimation period.
+        dt = odom.time_s - prev.odom.time_s
+        if not (math.isfinite(dt) and dt > 0):
+            dt = (receipt_ns - prev.receipt_ns) * 1e-9
+        if dt < 0.9 * self.period_s:
+            return None
+        self._last = point
+        u_mean = self.history.mean(prev.at_ns, point.at_ns)
+        if u_mean is None:
+            return None
+        x0 = np.concatenate([prev.odom.eta, prev.odom.nu])
+        x1 = np.concatenate([odom.eta, odom.nu])
+        return EstimationSample(Observation(x0, x1, dt), u_mean)

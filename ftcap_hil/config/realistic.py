@@ -92,7 +92,7 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     if truth.bank.time_constant_s.any():  # the allocator is told the thrusters' lag
         core = dataclasses.replace(core, thruster_lag_s=tuple(truth.bank.time_constant_s.tolist()))
     if core.estimator.measurement_std is None and sensor is not None:
-        std = tuple(float(v) for v in sensor.noise_std[3:6])
+        std = tuple(float(v) for v in sensor.noise_std)  # pose and velocities: PoseStep
         core = dataclasses.replace(
             core, estimator=dataclasses.replace(core.estimator, measurement_std=std)
         )
@@ -122,7 +122,7 @@ def _told_waves(est: EstimatorConfig, truth: TruthConfig) -> EstimatorConfig:
     sea = Environment(dataclasses.replace(env, current=CurrentConfig(), wind=WindConfig()),
                       truth.hull, seed=env.seed + 1)  # fmt: skip
     t = np.arange(0.0, 600.0, env.waves.tp_s / 20.0)
-    loads = np.array([sea.wave_wrench(float(ti), np.zeros(6)) for ti in t])
+    loads = sea.wave_wrench(t, np.zeros(6))  # (n, 3): the sea's components at once
     std = est.wave_force_std or tuple(float(v) for v in loads.std(axis=0))
     return dataclasses.replace(est, wave_period_s=env.waves.tp_s, wave_force_std=std)
 

@@ -273,8 +273,8 @@ def read_image(path: Path = DOCKERFILE) -> Image:
 def unknown_set_keys(argv: list[str]) -> list[str]:
     """``--set SECTION.KEY=VALUE`` whose key the shipped config of that subcommand lacks.
 
-    The allocator ignores unknown keys in its [can] and [zenoh] tables, so a misspelt key
-    there would run with the default: checked here against the shipped files instead.
+    The product refuses such a key when it starts (every table is strict); checking it here
+    finds a misspelt key in the compose files without starting a container.
     """
     from ftcap_hil.config.mission import GCS_KEYS, MISSION_KEYS
     from ftcap_hil.config.toml import shipped_config

@@ -38,7 +38,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.runtime.loop import DeadlineLoop
@@ -317,14 +317,17 @@ def expected_duration(mission: str, duration: float | None) -> float:
     return load_mission(mission).duration_s
 
 
-def print_summary(out: Path, wall_s: float) -> None:
+def print_summary(out: Path, wall_s: float, mission: str, duration_s: float) -> None:
     from ftcap_hil.report.summary import flight_summary_lines as summary_lines
 
     path = out / "results.json"
     if not path.exists():
         print(f"demo: no {path} (see {out / 'logs' / 'gcs.log'})")
         return
-    for line in summary_lines(json.loads(path.read_text())):
+    flight = json.loads(path.read_text())
+    for line in summary_lines(flight):
+        print(line)
+    for line in verdict(flight, mission, duration_s):
         print(line)
     plots = sorted(p.name for p in out.glob("*.png"))
     print(f"results: {path}; timeseries: {', '.join(str(p) for p in out.glob('*/timeseries.csv'))}")
@@ -357,6 +360,24 @@ def _fly(
     return 0
 
 
+def verdict(flight: dict[str, Any], mission: str, duration_s: float) -> list[str]:
+    """The verdict lines: the flight against an offline run of the same scenario (none, CAP,
+    F-TCAP; about a second)."""
+    from dataclasses import replace
+
+    from ftcap_hil.config.mission import load_mission
+    from ftcap_hil.core.status import Mode
+    from ftcap_hil.report.records import results
+    from ftcap_hil.report.summary import verdict_lines
+    from ftcap_hil.runtime.offline import run_modes
+
+    sc = replace(load_mission(mission).scenario, duration_s=duration_s)
+    offline = results(run_modes(sc, [Mode.NONE, Mode.CAP, Mode.FTCAP]))
+    if [list(p) for p in offline["phases"]] != [list(p) for p in flight["phases"]]:
+        return [f"verdict: none (the flight's phases {flight['phases']} are not the scenario's)"]
+    return verdict_lines(flight, offline)[0]
+
+
 def run(args: argparse.Namespace) -> int:
     """Fly the demo; the exit code (module docstring)."""
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
@@ -378,5 +399,5 @@ def run(args: argparse.Namespace) -> int:
     for failure in sup.failures():
         log.error("child failed: %s", failure)
         code = code or 1
-    print_summary(out, time.monotonic() - started)
+    print_summary(out, time.monotonic() - started, mission, expected)
     return code

@@ -61,6 +61,9 @@ def test_demo_completes_and_writes_the_simulator_outputs(demo: DemoRun) -> None:
     assert {"positions.png", "effectiveness.png", "bias.png", "xy_path.png"} <= pngs
     assert len(_rows(demo.out)) > 0.9 * DURATION_S / 0.2827
     assert "tracking rms" in demo.stdout and str(demo.out) in demo.stdout
+    # the demo explains itself: per phase what was injected, how the estimate did, a verdict
+    assert "VERDICT: every fault phase handled" in demo.stdout, demo.stdout[-3000:]
+    assert "WEAK thruster 1" in demo.stdout, demo.stdout[-3000:]
     assert {f"{name}.log" for name in CHILDREN} <= {p.name for p in (demo.out / "logs").iterdir()}
 
 

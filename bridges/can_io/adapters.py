@@ -3,7 +3,8 @@
 Allocator side (node ``node_id``, default 10):
 
 * ``CanThrusterSink``: ``send(u)`` -> one ``esc.RawCommand`` transfer (all thrusters);
-  ``tick()`` -> own ``NodeStatus`` at 1 Hz; the loop thread calls both.
+  ``tick()`` -> own ``NodeStatus`` at 1 Hz; the loop thread calls both. With
+  ``start_stream()`` the latest command is also re-sent at the ESCs' rate (``esc_stream.py``).
 * ``CanEscStatusSource``: Notifier callback; ``esc.Status`` -> ``EscStatus`` into one
   ``Mailbox`` per thruster (``esc_index`` = thruster index). An ESC whose mailbox ages is the
   loop's to declare failed.
@@ -43,7 +44,8 @@ from bridges.can_io.codec import (
     check_node_id,
     check_node_ids,
 )
-from bridges.can_io.force_map import ForceRawMap
+from bridges.can_io.esc_stream import DEFAULT_HOLD_S, DEFAULT_RATE_HZ, EscCommandStream
+from bridges.can_io.force_map import ForceMap
 from bridges.can_io.ports import CanReceiver, CanSender
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import EscStatus, ThrusterCommand
@@ -58,7 +60,7 @@ class CanThrusterSink(CanSender):
     def __init__(
         self,
         bus: can.BusABC,
-        force_map: ForceRawMap,
+        force_map: ForceMap,
         *,
         node_id: int = DEFAULT_ALLOCATOR_NODE_ID,
         priority: int = PRIORITY_HIGH,
@@ -75,17 +77,33 @@ class CanThrusterSink(CanSender):
         self.health = Health.OK
         self.mode = Mode.OPERATIONAL
         self.last_raw: tuple[int, ...] | None = None
+        self.stream: EscCommandStream | None = None
+
+    def start_stream(
+        self, rate_hz: float = DEFAULT_RATE_HZ, hold_s: float = DEFAULT_HOLD_S
+    ) -> EscCommandStream:
+        """Re-send the latest command every ``1 / rate_hz`` s (1..400 Hz) from a thread,
+        zero once no ``send`` came for ``hold_s``; stopped by ``shutdown()``. Once only."""
+        if self.stream is not None:
+            raise RuntimeError("CanThrusterSink: the ESC stream is already running")
+        zero = (0,) * self.force_map.m
+        self.stream = EscCommandStream(self.send_raw, zero, rate_hz=rate_hz, hold_s=hold_s)
+        return self.stream.start()
 
     def send(self, u: Sequence[float] | np.ndarray) -> bool:
-        """Send forces ``u`` (m,) in N. Raises ``NonFiniteCommand`` for NaN/inf (nothing sent).
+        """Send forces ``u`` (m,) in N now (and hold them in the ESC stream, if running).
+        Raises ``NonFiniteCommand`` for NaN/inf (nothing sent, nothing held).
 
         Returns False (and marks the port stale) if the bus refused the frames.
         """
-        return self.send_raw(self.force_map.to_raw(u))
+        raw = self.force_map.to_raw(u)
+        if self.stream is not None:
+            self.stream.update(tuple(int(v) for v in raw))
+        return self.send_raw(raw)
 
     def send_zero(self) -> bool:
         """Command zero force on every thruster (raw 0); False if the bus refused it."""
-        return self.send_raw(np.zeros(self.force_map.m, dtype=np.int64))
+        return self.send(np.zeros(self.force_map.m))
 
     def send_raw(self, raw: Sequence[int] | np.ndarray) -> bool:
         """Send raw int14 values directly (length m, clipped to +-8191 by the codec)."""
@@ -112,9 +130,11 @@ class CanThrusterSink(CanSender):
         return self._send(msg, self.node_id, DataType.NODE_STATUS, PRIORITY_LOWEST)
 
     def _close(self) -> None:
+        if self.stream is not None:
+            self.stream.stop()
         if self._zero_on_shutdown:
             # The last writes: command zero, then announce that this node goes offline.
-            self.send_zero()
+            self.send_raw(np.zeros(self.force_map.m, dtype=np.int64))
             self._send_node_status(Mode.OFFLINE)
 
 
@@ -258,7 +278,7 @@ class CanCommandSource(CanReceiver):
     def __init__(
         self,
         bus: can.BusABC,
-        force_map: ForceRawMap,
+        force_map: ForceMap,
         *,
         allocator_node_id: int | None = DEFAULT_ALLOCATOR_NODE_ID,
         notifier: can.Notifier | None = None,

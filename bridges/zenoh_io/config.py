@@ -68,6 +68,9 @@ def role_settings(
 
     A router listens on ``tcp/host:port``; a client or peer connects there and listens nowhere.
     Gossip is off too: every session talks to the one router, so there is nothing to gossip.
+    Shared memory is off: the payloads are small JSON, and each session that joins a router
+    over shared memory maps a segment there that stays resident after it leaves (about
+    20 MB per client session on loopback).
     """
     role = _role(role, "role")
     here = json.dumps([endpoint(host, port)])
@@ -75,6 +78,7 @@ def role_settings(
         "mode": json.dumps(role.value),
         "scouting/multicast/enabled": "false",
         "scouting/gossip/enabled": "false",
+        "transport/shared_memory/enabled": "false",
     }
     if role is ZenohRole.ROUTER:
         settings |= {"listen/endpoints": here, "connect/endpoints": "[]"}

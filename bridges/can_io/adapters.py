@@ -46,6 +46,7 @@ from bridges.can_io.codec import (
 )
 from bridges.can_io.esc_stream import DEFAULT_HOLD_S, DEFAULT_RATE_HZ, EscCommandStream
 from bridges.can_io.force_map import ForceMap
+from bridges.can_io.node import ConflictDetector
 from bridges.can_io.ports import CanReceiver, CanSender
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import EscStatus, ThrusterCommand
@@ -119,6 +120,10 @@ class CanThrusterSink(CanSender):
         """Health and mode reported in the next NodeStatus."""
         self.health, self.mode = health, mode
 
+    def current_status(self, node_id: int | None = None) -> NodeStatusMsg:
+        """This node's NodeStatus now (uptime, health, mode); what GetNodeInfo reports."""
+        return NodeStatusMsg(self._uptime_s(), self.health, self.mode)
+
     def tick(self, now_ns: int | None = None) -> bool:
         """Send NodeStatus if one is due (first call: now). True if one was sent."""
         if not self._status_due(now_ns):
@@ -184,6 +189,10 @@ class CanEscStatusSink(CanSender):
     def send_all(self, statuses: Iterable[EscStatus]) -> bool:
         """Send each; True only if all went out."""
         return all([self.send(s) for s in statuses])
+
+    def current_status(self, node_id: int | None = None) -> NodeStatusMsg:
+        """A simulated ESC's NodeStatus now (uptime, health OK, operational)."""
+        return NodeStatusMsg(self._uptime_s())
 
     def tick(self, now_ns: int | None = None, indices: Iterable[int] | None = None) -> bool:
         """NodeStatus for the ESCs in ``indices`` (default all) if due. True if sent."""
@@ -273,6 +282,10 @@ class CanCommandSource(CanReceiver):
 
     ``allocator_node_id=None`` accepts commands from any node. A command whose length is not
     ``force_map.m`` is malformed. The allocator's NodeStatus lands in ``allocator_status``.
+    ``conflict`` watches the allocator's node ID for a second sender (``node.py``); while a
+    conflict is on, commands are dropped (``dropped_in_conflict``) unless
+    ``obey_in_conflict``: which sender is genuine cannot be told, and the ESC timeout then
+    stops the thrusters rather than obey a stranger.
     """
 
     def __init__(
@@ -283,6 +296,7 @@ class CanCommandSource(CanReceiver):
         allocator_node_id: int | None = DEFAULT_ALLOCATOR_NODE_ID,
         notifier: can.Notifier | None = None,
         poll_timeout_s: float = 0.1,
+        obey_in_conflict: bool = False,
         owns_bus: bool = False,
     ) -> None:
         if allocator_node_id is not None:
@@ -292,6 +306,9 @@ class CanCommandSource(CanReceiver):
         self.commands: Mailbox[ThrusterCommand] = Mailbox("can_thruster_command")
         self.raw_commands: Mailbox[tuple[int, ...]] = Mailbox("can_raw_command")
         self.allocator_status: Mailbox[NodeStatusMsg] = Mailbox("can_allocator_status")
+        self.conflict = None if allocator_node_id is None else ConflictDetector(allocator_node_id)
+        self._obey_in_conflict = obey_in_conflict
+        self.dropped_in_conflict = 0
         super().__init__(
             bus,
             owns_bus,
@@ -305,9 +322,13 @@ class CanCommandSource(CanReceiver):
         if self._allocator is not None and got.source_node_id != self._allocator:
             return
         msg = got.message
+        in_conflict = self.conflict is not None and self.conflict.observe(got, now_ns)
         if isinstance(msg, NodeStatusMsg):
             self.allocator_status.put(msg, now_ns)
         elif isinstance(msg, RawCommandMsg):
+            if in_conflict and not self._obey_in_conflict:
+                self.dropped_in_conflict += 1
+                return
             if len(msg.raw) != self.force_map.m:
                 raise MalformedMessage(
                     f"RawCommand: {len(msg.raw)} values for {self.force_map.m} thrusters"

@@ -165,6 +165,18 @@ class CanReceiver(CanPort, can.Listener):
         self._notifier = notifier if notifier is not None else can.Notifier(bus, [], poll_timeout_s)
         self._notifier.add_listener(self)
 
+    @property
+    def notifier(self) -> can.Notifier:
+        """The Notifier this receiver listens on: give it to other listeners of the bus
+        (python-can allows one Notifier per bus)."""
+        return self._notifier
+
+    @property
+    def assembler(self) -> TransferAssembler:
+        """The reassembler, for its counters (``pending``, ``orphans``, ``expired``,
+        ``evicted``)."""
+        return self._assembler
+
     def on_message_received(self, msg: can.Message) -> None:
         """python-can callback (Notifier thread): reassemble, decode, hand to ``_handle``;
         malformed input is counted and dropped."""

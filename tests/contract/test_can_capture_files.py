@@ -87,9 +87,10 @@ def test_python_can_capture_files_decode_and_replay(tmp_path: Path) -> None:
 def test_a_replayed_capture_drives_the_vessel_side(tmp_path: Path) -> None:
     _, asc_path, sent = _record(tmp_path)
     with CanHub(port=0).start() as hub:
-        with open_can_bus("canhub", hub.channel) as vessel_bus, open_can_bus(
-            "canhub", hub.channel
-        ) as player:
+        with (
+            open_can_bus("canhub", hub.channel) as vessel_bus,
+            open_can_bus("canhub", hub.channel) as player,
+        ):
             source = CanCommandSource(vessel_bus, FMAP)
             got: list[tuple[int, ...]] = []
             for msg in can.MessageSync(can.LogReader(str(asc_path))):  # original timing

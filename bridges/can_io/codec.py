@@ -320,6 +320,9 @@ class TransferAssembler:
     older than ``timeout_s`` is dropped (``expired``) and at most ``max_pending`` are kept,
     the oldest dropped first (``evicted``). Sessions are kept in start order, so expiry looks
     at the oldest only: the cost of a frame does not grow with the number pending.
+
+    Every frame fed is counted (``frames``) and lands in one of ``ignored`` (not ours),
+    ``orphans``, ``rejected`` (``feed`` raised) or ``consumed`` (taken into a transfer).
     """
 
     def __init__(
@@ -336,16 +339,30 @@ class TransferAssembler:
         self._timeout_ns = int(timeout_s * 1e9)
         self._max_pending = max_pending
         self._pending: OrderedDict[tuple[int, int], _Pending] = OrderedDict()
+        self.frames = 0  # fed: ignored, orphans, rejected or consumed
+        self.ignored = 0  # not ours (11-bit, services, anonymous, other types)
         self.orphans = 0
+        self.rejected = 0  # broke the protocol: feed raised MalformedMessage
         self.expired = 0
         self.evicted = 0
 
     def feed(self, frame: CanFrame, stamp_ns: int) -> Received | None:
         """Take one frame received at ``stamp_ns`` (monotonic); see the class docstring."""
+        self.frames += 1
+        try:
+            got = self._feed(frame, stamp_ns)
+        except MalformedMessage:
+            self.rejected += 1
+            raise
+        return got
+
+    def _feed(self, frame: CanFrame, stamp_ns: int) -> Received | None:
         if not frame.extended:
+            self.ignored += 1
             return None
         fid = FrameId.parse(frame.can_id)
         if fid is None or fid.data_type_id not in self._accept:
+            self.ignored += 1
             return None
         if not frame.data or len(frame.data) > 8:
             raise MalformedMessage(f"frame 0x{frame.can_id:08X}: data length {len(frame.data)}")
@@ -404,6 +421,11 @@ class TransferAssembler:
                 return
             self._pending.popitem(last=False)
             self.expired += 1
+
+    @property
+    def consumed(self) -> int:
+        """Frames taken into a transfer (completed, still pending, or later expired)."""
+        return self.frames - self.ignored - self.orphans - self.rejected
 
     @property
     def pending(self) -> int:

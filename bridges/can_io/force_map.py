@@ -143,7 +143,8 @@ class ForceRawMap:
         caller's array is never modified.
         """
         arr = _forces(u, self.m)
-        raw = np.rint(arr * (RAW_MAX / self.u_max_abs))
+        lim = self.u_max_abs  # clip first: a huge finite force must not overflow to inf
+        raw = np.rint(np.clip(arr, -lim, lim) * (RAW_MAX / lim))
         raw[np.abs(arr) <= self.deadband_n] = 0.0
         return np.clip(raw, -RAW_MAX, RAW_MAX).astype(np.int64)
 

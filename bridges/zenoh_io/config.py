@@ -31,7 +31,7 @@ from ftcap_hil.core.errors import ConfigError
 
 DEFAULT_PORT = 7447
 LOOPBACK = "127.0.0.1"
-SHIPPED_CONFIGS = ("allocator", "vessel", "gcs")
+SHIPPED_CONFIGS = ("allocator", "vessel", "gcs", "allocator-tls", "vessel-tls", "gcs-tls")
 CHECKED_KEYS = (
     "mode",
     "listen/endpoints",

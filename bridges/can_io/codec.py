@@ -211,6 +211,14 @@ def encode(
     return [CanFrame(f.message_id, bytes(f.bytes)) for f in transfer.to_frames()]
 
 
+def with_transfer_id(frames: Sequence[CanFrame], transfer_id: int) -> list[CanFrame]:
+    """The same transfer with another transfer ID: only the tail bytes change (the CRC of a
+    multi-frame transfer covers the payload, not the tail), so re-sending a message need
+    not serialize it again."""
+    tid = transfer_id & 0x1F
+    return [CanFrame(f.can_id, f.data[:-1] + bytes([(f.data[-1] & 0xE0) | tid])) for f in frames]
+
+
 def encode_raw_command(
     raw: Iterable[int], *, source_node_id: int, transfer_id: int, priority: int = PRIORITY_HIGH
 ) -> list[CanFrame]:

@@ -28,6 +28,7 @@ from bridges.can_io.codec import (
     decode_frames,
     encode,
     encode_raw_command,
+    with_transfer_id,
 )
 from bridges.can_io.force_map import RAW_MAX, ForceRawMap, NonFiniteCommand
 from ftcap_hil.core.errors import MalformedMessage
@@ -298,3 +299,11 @@ def test_assembler_expiry_counts_and_survives_a_clock_step_back() -> None:
 def test_assembler_refuses_unbounded_settings(bad: dict[str, float]) -> None:
     with pytest.raises(ValueError):
         TransferAssembler(**bad)  # type: ignore[arg-type]
+
+
+def test_a_resent_transfer_only_changes_its_tail_bytes() -> None:
+    for m in (2, 8, 20):
+        a = encode_raw_command(list(range(m)), source_node_id=10, transfer_id=3)
+        b = encode_raw_command(list(range(m)), source_node_id=10, transfer_id=30)
+        assert with_transfer_id(a, 30) == b
+        assert decode_frames(with_transfer_id(a, 62)).transfer_id == 30  # wraps like next()

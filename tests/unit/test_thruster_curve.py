@@ -116,3 +116,14 @@ def test_a_wrong_curve_on_the_allocator_side_is_a_thrust_error() -> None:
     assert np.all(ratio < 0.8)  # every one well short of what was asked
     right = np.array([physical.to_force(physical.to_raw(u))[0] for u in asked])
     assert np.allclose(right, asked[:, 0], atol=0.01)
+
+
+def test_the_shipped_wrong_curve_under_delivers_against_the_t200() -> None:
+    path = resources.files("ftcap_hil").joinpath("data", "thrusters", "t200-12v-linear.toml")
+    wrong = ThrusterCurve.from_mapping(tomllib.loads(path.read_text()), "t200-12v-linear.toml")
+    true = _t200()
+    assert (wrong.thrust_max_n, wrong.thrust_min_n) == (true.thrust_max_n, true.thrust_min_n)
+    asked = np.linspace(2.0, 34.0, 17)
+    got = true.thrust(wrong.fraction_for(asked))
+    assert np.all(got < asked)  # short at every partial command
+    assert float(got[0]) == 0.0  # 2 N asks for 5.5 % command: inside the dead zone

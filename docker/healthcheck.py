@@ -69,8 +69,9 @@ def allocator_cycling(config: str, vessel: str, gap_s: float = 0.6) -> tuple[boo
         return False, "allocator: answered once, then no more"
     if second.cycle <= first.cycle:
         return False, f"allocator: stuck at cycle {second.cycle}"
+    mode = "unknown" if second.mode is None else second.mode.value
     return True, (
-        f"allocator: mode {second.mode}, cycle {first.cycle} -> {second.cycle}, "
+        f"allocator: mode {mode}, cycle {first.cycle} -> {second.cycle}, "
         f"{second.overruns} overruns, degraded {second.degraded}, stale setpoint "
         f"{second.setpoint_stale} telemetry {second.telemetry_stale}"
     )

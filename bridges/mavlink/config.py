@@ -33,10 +33,7 @@ FTCAP_STATUS) from :mod:`bridges.mavlink.dialect`, set explicitly on every conne
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 from ftcap_hil.core.errors import ConfigError
 
@@ -73,7 +70,7 @@ class MavlinkEndpoint:
     connection: str
     system_id: int
     component_id: int
-    peers: tuple[str, ...] = ()
+    peers: tuple[str, ...] = ()  # (the [mavlink] table is read by ftcap_hil.config.bridges)
 
     def __post_init__(self) -> None:
         for key, value in (("system_id", self.system_id), ("component_id", self.component_id)):
@@ -90,23 +87,6 @@ class MavlinkEndpoint:
             )
         for peer in self.peers:
             parse_host_port("peers", peer)
-
-    @classmethod
-    def from_mapping(
-        cls, section: str, values: Mapping[str, Any], default: MavlinkEndpoint
-    ) -> MavlinkEndpoint:
-        """``default`` overridden by a config table; errors name ``section.key``."""
-        known = {"connection", "system_id", "component_id", "peers"}
-        if unknown := sorted(set(values) - known):
-            raise LinkConfigError(f"{section}: unknown keys {unknown}, expected {sorted(known)}")
-        merged: dict[str, Any] = {**dataclasses.asdict(default), **values}
-        if isinstance(merged["peers"], str) or not isinstance(merged["peers"], Sequence):
-            raise LinkConfigError(f"{section}.peers: expected a list of 'host:port'")
-        merged["peers"] = tuple(merged["peers"])
-        try:
-            return cls(**merged)
-        except LinkConfigError as e:
-            raise LinkConfigError(f"{section}.{e}") from None
 
     @classmethod
     def inbox(

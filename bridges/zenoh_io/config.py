@@ -12,6 +12,13 @@ Network policy enforced by :func:`check_settings` (the start-up check of every s
 * a router must listen somewhere, and a client must have a ``connect/endpoints`` entry,
   since with scouting off nothing else would find the peer.
 
+Unknown keys: zenoh itself refuses them, in a file (``Config.from_file``, serde's
+``unknown field `x`, expected one of ...`` at every level except the free-form ``plugins``
+tables) and in an override (``insert_json5``: ``unknown key``). :func:`describe_file_error`
+and :func:`describe_override_error` restate those errors in the project's form: the file,
+the table (found in zenoh's default configuration by its set of valid keys), the key, the
+nearest valid key and the valid keys.
+
 Shipped files, ``ftcap_hil/data/zenoh/{allocator,vessel,gcs}.json5``, put the allocator in
 ``router`` mode on ``tcp/127.0.0.1:7447`` and the vessel and ground station in ``client`` mode
 connecting to it.
@@ -19,10 +26,12 @@ connecting to it.
 
 from __future__ import annotations
 
+import difflib
 import enum
 import ipaddress
 import json
-from collections.abc import Mapping
+import re
+from collections.abc import Iterator, Mapping
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -182,3 +191,53 @@ def _for_mode(value: object, key: str, role: ZenohRole) -> tuple[str, list[str]]
     if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
         raise ZenohConfigError(f"{key} = {value!r}: expected a list of endpoint strings")
     return key, value
+
+
+_UNKNOWN_FIELD = re.compile(r"unknown field `([^`]*)`, expected (.*?)(?:\"|, location|$)")
+_LOCATION = re.compile(r"line: (\d+), column: (\d+)")
+
+
+def _tables(tree: Mapping[str, Any], path: str = "") -> Iterator[tuple[str, Mapping[str, Any]]]:
+    """Every table of a configuration tree with its ``a/b`` path (``""``: the top)."""
+    yield path, tree
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            yield from _tables(value, f"{path}/{key}" if path else key)
+
+
+def _unknown(key: str, valid: list[str], table: str | None) -> str:
+    near = difflib.get_close_matches(key, valid, n=1, cutoff=0.6)
+    hint = f" (did you mean {near[0]!r}?)" if near else ""
+    where = f"[{table}] " if table else ""
+    return f"{where}unknown key {key!r}{hint}; valid keys: {', '.join(sorted(valid))}"
+
+
+def describe_file_error(source: str, error: str, defaults: Mapping[str, Any]) -> str:
+    """``error`` of ``zenoh.Config.from_file`` restated; ``defaults`` is zenoh's default
+    configuration as JSON (``str(zenoh.Config())``), where the table is looked up."""
+    match = _UNKNOWN_FIELD.search(error)
+    if match is None:
+        return f"{source}: {error}"
+    key, valid = match.group(1), re.findall(r"`([^`]*)`", match.group(2))
+    tables = [path or "top" for path, t in _tables(defaults) if set(t) == set(valid)]
+    at = _LOCATION.search(error)
+    place = f" (line {at.group(1)}, column {at.group(2)})" if at else ""
+    table = " or ".join(tables) if tables and tables != ["top"] else None
+    return f"{source}: {_unknown(key, valid, table)}{place}"
+
+
+def describe_override_error(key: str, value: str, error: str, defaults: Mapping[str, Any]) -> str:
+    """An override ``key:value`` that zenoh refused with ``error``; for an unknown key, the
+    first unknown part of it, its table and the nearest valid key (``defaults`` as for
+    :func:`describe_file_error`)."""
+    if "unknown key" not in error:
+        return f"zenoh config key {key!r} = {value!r}: {error}"
+    table: Any = defaults
+    parts = key.split("/")
+    for i, part in enumerate(parts):
+        if not isinstance(table, dict):
+            break
+        if part not in table:
+            return f"--cfg {key}:{value}: {_unknown(part, list(table), '/'.join(parts[:i]))}"
+        table = table[part]
+    return f"zenoh config key {key!r} = {value!r}: {error}"

@@ -14,6 +14,7 @@ in :mod:`bridges.zenoh_io.link`; this package is the only place that imports zen
 from __future__ import annotations
 
 import atexit
+import functools
 import json
 import logging
 import threading
@@ -33,6 +34,8 @@ from bridges.zenoh_io.config import (
     ZenohConfigError,
     ZenohRole,
     check_settings,
+    describe_file_error,
+    describe_override_error,
     parse_override,
     role_settings,
     shipped_config_path,
@@ -60,7 +63,7 @@ def apply_overrides(conf: zenoh.Config, overrides: Sequence[str] | Mapping[str, 
         try:
             conf.insert_json5(key, value)
         except zenoh.ZError as e:
-            raise ZenohConfigError(f"zenoh config key {key!r} = {value!r}: {e}") from e
+            raise ZenohConfigError(describe_override_error(key, value, str(e), _defaults())) from e
 
 
 def validate_config(conf: zenoh.Config, source: str = "zenoh config") -> ZenohRole:
@@ -87,10 +90,22 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> zenoh.Config
     try:
         conf = zenoh.Config.from_file(str(path))
     except zenoh.ZError as e:
-        raise ZenohConfigError(f"zenoh config file {path}: {e}") from e
+        message = describe_file_error(f"zenoh config file {path}", str(e), _defaults())
+        raise ZenohConfigError(message) from e
     apply_overrides(conf, overrides)
     validate_config(conf, f"zenoh config {path}")
     return conf
+
+
+@functools.cache
+def _defaults() -> dict[str, Any]:
+    """zenoh's default configuration as JSON (where error messages look tables up; {} if
+    this zenoh prints its Config otherwise: the messages then name no table)."""
+    try:
+        defaults = json.loads(str(zenoh.Config()))
+    except ValueError:
+        return {}
+    return defaults if isinstance(defaults, dict) else {}
 
 
 def _get_json(conf: zenoh.Config, key: str) -> Any:

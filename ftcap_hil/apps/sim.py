@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--duration: expected a positive number of seconds, got {args.duration}")
     cfg = load_config(args.config, args.set, args.scenario)
     with contextlib.ExitStack() as stack:
-        ports = VesselPorts.open(cfg.raw, cfg.sim.thrusters, cfg.shell.fault_injection_enabled)
+        ports = VesselPorts.open(cfg.ports, cfg.sim.thrusters, cfg.shell.fault_injection_enabled)
         stack.callback(ports.shutdown)
         recorder = None
         if args.record is not None:

@@ -1,21 +1,20 @@
 """Campaign files (TOML): scenarios x seeds x modes, fault generation, healthy runs, metrics.
 
 The format is documented in ``docs/campaigns.md``; shipped files live in
-``ftcap_hil/data/campaigns``. Every table is strict: an unknown key is an error that names
-the file, the table, the key and the nearest valid key. What a scenario override or a
-variant sets is checked by the scenario reader when the plan is built.
+``ftcap_hil/data/campaigns``. Read with :class:`~ftcap_hil.config.tables.Table`: an unknown
+key is an error that names the file, the table, the key and the nearest valid key. What a
+scenario override or a variant sets is checked by the scenario reader when the plan is
+built.
 """
 
 from __future__ import annotations
 
-import difflib
-import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml
-from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.campaign_metrics import MetricParams
 
@@ -90,213 +89,146 @@ class CampaignSpec:
     base: Path | None  # folder relative scenario paths resolve against
 
 
-def strict(table: Any, allowed: tuple[str, ...] | set[str], where: str) -> dict[str, Any]:
-    """``table`` if it is a table with only ``allowed`` keys, else a ConfigError."""
-    if not isinstance(table, dict):
-        raise ConfigError(f"{where}: expected a table, got {table!r}")
-    for key in table:
-        if key not in allowed:
-            near = difflib.get_close_matches(key, list(allowed), 1)
-            hint = f"did you mean {near[0]!r}?" if near else f"known: {sorted(allowed)}"
-            raise ConfigError(f"{where}: unknown key {key!r} ({hint})")
-    return table
-
-
-def _number(table: dict[str, Any], key: str, where: str, positive: bool = True) -> float | None:
-    if key not in table:
-        return None
-    v = table[key]
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise ConfigError(f"{where}.{key}: expected a finite number, got {v!r}")
-    if positive and not v > 0:
-        raise ConfigError(f"{where}.{key}: must be > 0, got {v!r}")
-    return float(v)
-
-
-def _range(table: dict[str, Any], key: str, where: str, default: Range | None) -> Range | None:
-    if key not in table:
+def _range(t: Table, key: str, default: Range | None) -> Range | None:
+    """``[low, high]`` with 0 <= low <= high (``default`` if absent)."""
+    if not t.has(key):
+        t.allow(key)
         return default
-    v = table[key]
-    ok = (
-        isinstance(v, list)
-        and len(v) == 2
-        and all(
-            isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in v
-        )
-    )
-    if not ok or not 0 <= v[0] <= v[1]:
-        raise ConfigError(f"{where}.{key}: expected [low, high] with 0 <= low <= high, got {v!r}")
-    return float(v[0]), float(v[1])
+    low, high = t.vector(key, 2, lo=0.0)
+    if low > high:
+        raise t.error(key, f"expected [low, high] with low <= high, got {t.value(key)!r}")
+    return float(low), float(high)
 
 
-def _ints(v: Any, where: str, low: int = 0) -> tuple[int, ...]:
-    if not isinstance(v, list) or not v or not all(type(x) is int and x >= low for x in v):
-        raise ConfigError(f"{where}: expected a non-empty list of integers >= {low}, got {v!r}")
-    if len(set(v)) != len(v):
-        raise ConfigError(f"{where}: duplicates in {v!r}")
-    return tuple(v)
+def _distinct(t: Table, key: str, low: int) -> tuple[int, ...]:
+    values = t.integers(key, None, lo=low)
+    if not values or len(set(values)) != len(values):
+        raise t.error(key, f"expected distinct integers >= {low}, got {list(values)}")
+    return values
 
 
-def _seeds(table: dict[str, Any], where: str) -> tuple[int, ...]:
-    if ("seeds" in table) == ("seed_count" in table):
-        raise ConfigError(f"{where}: give seeds = [...] or seed_count = N (one of them)")
-    if "seeds" in table:
-        return _ints(table["seeds"], f"{where}.seeds")
-    n = table["seed_count"]
-    if type(n) is not int or n < 1:
-        raise ConfigError(f"{where}.seed_count: expected an integer >= 1, got {n!r}")
-    return tuple(range(n))
+def _seeds(t: Table) -> tuple[int, ...]:
+    if t.has("seeds") == t.has("seed_count"):
+        raise t.error(None, "give seeds = [...] or seed_count = N (one of them)")
+    t.allow("seeds", "seed_count")
+    if t.has("seeds"):
+        return _distinct(t, "seeds", 0)
+    return tuple(range(t.integer("seed_count", lo=1)))
 
 
-def _scenario(table: Any, where: str) -> ScenarioEntry:
-    allowed = ("source", "label", "faults", "set", "duration", "length_m")
-    t = strict(table, allowed, where)
-    source = t.get("source")
-    if not isinstance(source, str) or not source:
-        raise ConfigError(f"{where}.source: expected a scenario file or shipped name")
-    faults = t.get("faults", "scenario")
-    if faults not in FAULT_SOURCES:
-        raise ConfigError(f"{where}.faults: expected one of {list(FAULT_SOURCES)}, got {faults!r}")
-    label = t.get("label", Path(source).stem)
-    if not isinstance(label, str) or not label or "/" in label:
-        raise ConfigError(f"{where}.label: expected a name without '/', got {label!r}")
+def _free_table(t: Table, key: str) -> dict[str, Any]:
+    """A table copied as it is (checked later, by the scenario reader, when planned)."""
+    value = t.value(key, {})
+    if not isinstance(value, dict):
+        raise t.error(key, f"expected a table, got {value!r}")
+    return value
+
+
+def _scenario(t: Table) -> ScenarioEntry:
+    source = t.string("source")
+    label = t.string("label", Path(source).stem)
+    if "/" in label:
+        raise t.error("label", f"expected a name without '/', got {label!r}")
     return ScenarioEntry(
         source,
         label,
-        faults,
-        strict(t.get("set", {}), set(t.get("set", {})), f"{where}.set"),
-        _number(t, "duration", where),
-        _number(t, "length_m", where),
+        t.choice("faults", FAULT_SOURCES, "scenario"),
+        _free_table(t, "set"),
+        t.number("duration", None, positive=True),
+        t.number("length_m", None, positive=True),
     )
 
 
-def _variant(name: str, table: Any, where: str) -> Variant:
-    t = strict(table, ("mode", *VARIANT_TABLES), where)
-    mode = PLAIN_MODES.get(t.get("mode", ""))
-    if mode is None:
-        raise ConfigError(
-            f"{where}.mode: expected one of {list(PLAIN_MODES)}, got {t.get('mode')!r}"
-        )
-    tables = {k: strict(t[k], set(t[k]), f"{where}.{k}") for k in VARIANT_TABLES if k in t}
+def _variant(name: str, t: Table) -> Variant:
+    mode = PLAIN_MODES[t.choice("mode", list(PLAIN_MODES))]
+    tables = {k: _free_table(t, k) for k in VARIANT_TABLES if t.has(k)}
+    t.allow(*VARIANT_TABLES)
     return Variant(name, mode, tables)
 
 
-def _variants(modes: Any, tables: Any, where: str) -> tuple[Variant, ...]:
-    if not isinstance(modes, list) or not all(isinstance(m, str) for m in modes):
-        raise ConfigError(f"{where}.campaign.modes: expected a list of names, got {modes!r}")
-    defined = strict(tables, set(tables), f"{where}.variant")
-    for name in defined:
+def _variants(head: Table, root: Table) -> tuple[Variant, ...]:
+    modes = head.strings("modes", ["ftcap"])
+    defined = root.table("variant")
+    for name in defined.data:
         if name in PLAIN_MODES or name == "none":
-            raise ConfigError(f"{where}.variant.{name}: a variant cannot take a mode's name")
+            raise defined.error(name, "a variant cannot take a mode's name")
     out = [Variant("cap", Mode.CAP, {}), Variant("oracle", Mode.ORACLE, {})]
     for name in dict.fromkeys(modes):
         if name in ("cap", "oracle"):
             continue
         if name in PLAIN_MODES:
             out.append(Variant(name, PLAIN_MODES[name], {}))
-        elif name in defined:
-            out.append(_variant(name, defined[name], f"{where}.variant.{name}"))
+        elif name in defined.data:
+            out.append(_variant(name, defined.table(name)))
         else:
-            known = [*PLAIN_MODES, *defined]
-            raise ConfigError(f"{where}.campaign.modes: {name!r} is no mode or [variant] ({known})")
-    unused = set(defined) - set(modes)
-    if unused:
-        raise ConfigError(f"{where}.variant: {sorted(unused)} defined but not in campaign.modes")
+            known = [*PLAIN_MODES, *defined.data]
+            raise head.error("modes", f"{name!r} is no mode or [variant] ({known})")
+    if unused := sorted(set(defined.data) - set(modes)):
+        raise defined.error(None, f"{unused} defined but not in [campaign] modes")
     return tuple(out)
 
 
-def _faults(table: Any, m_where: str) -> FaultSpec:
-    where = f"{m_where}.faults"
-    t = strict(table, {f.name for f in fields(FaultSpec)}, where)
+RANGES: tuple[str, ...] = ("onset", "duration", "partial_delta", "bias", "stuck")
+RANGES += ("intermittent_on", "intermittent_off")
+
+
+def _faults(t: Table) -> FaultSpec:
     d = FaultSpec()
-    kinds = t.get("kinds", list(d.kinds))
-    if not isinstance(kinds, list) or not kinds or not set(kinds) <= set(FAULT_KINDS):
-        raise ConfigError(f"{where}.kinds: expected a list from {list(FAULT_KINDS)}, got {kinds!r}")
-    count = t.get("count", 1)
-    if type(count) is not int or count < 1:
-        raise ConfigError(f"{where}.count: expected an integer >= 1, got {count!r}")
-    each = t.get("each_kind", True)
-    if not isinstance(each, bool):
-        raise ConfigError(f"{where}.each_kind: expected true or false, got {each!r}")
-    thr = t.get("thrusters")
-    ranges = {
-        name: _range(t, name, where, getattr(d, name))
-        for name in (
-            "onset",
-            "duration",
-            "partial_delta",
-            "bias",
-            "stuck",
-            "intermittent_on",
-            "intermittent_off",
-        )
-    }
+    kinds = t.strings("kinds", d.kinds)
+    if not kinds or not set(kinds) <= set(FAULT_KINDS):
+        raise t.error("kinds", f"expected a list from {list(FAULT_KINDS)}, got {list(kinds)}")
+    ranges = {name: _range(t, name, getattr(d, name)) for name in RANGES}
     if ranges["partial_delta"] is not None and ranges["partial_delta"][1] >= 1.0:
-        raise ConfigError(f"{where}.partial_delta: must stay below 1, got {t['partial_delta']}")
+        raise t.error("partial_delta", f"must stay below 1, got {list(ranges['partial_delta'])}")
+    thrusters = _distinct(t, "thrusters", 1) if t.has("thrusters") else None
+    t.allow("thrusters")
     return FaultSpec(
         kinds=tuple(dict.fromkeys(kinds)),
-        each_kind=each,
-        count=count,
-        thrusters=None
-        if thr is None
-        else tuple(i - 1 for i in _ints(thr, f"{where}.thrusters", 1)),
+        each_kind=t.boolean("each_kind", d.each_kind),
+        count=t.integer("count", d.count, lo=1),
+        thrusters=None if thrusters is None else tuple(i - 1 for i in thrusters),
         **ranges,  # type: ignore[arg-type]
     )
 
 
-def _healthy(table: Any, where: str) -> HealthySpec:
-    t = strict(table, ("seeds", "seed_count", "duration", "scenarios"), f"{where}.healthy")
-    labels = t.get("scenarios")
-    if labels is not None and not (isinstance(labels, list) and labels):
-        raise ConfigError(f"{where}.healthy.scenarios: expected a list of labels, got {labels!r}")
-    return HealthySpec(
-        _seeds(t, f"{where}.healthy"),
-        _number(t, "duration", f"{where}.healthy"),
-        None if labels is None else tuple(labels),
+def _healthy(t: Table, labels: list[str]) -> HealthySpec:
+    chosen = t.strings("scenarios") if t.has("scenarios") else None
+    t.allow("scenarios")
+    if chosen is not None and (not chosen or not set(chosen) <= set(labels)):
+        raise t.error("scenarios", f"expected labels from {labels}, got {list(chosen)}")
+    return HealthySpec(_seeds(t), t.number("duration", None, positive=True), chosen)
+
+
+def campaign_from(root: Table, base: Path | None = None) -> CampaignSpec:
+    """A campaign from the top level of its file (module docstring)."""
+    head = root.table("campaign", required=True)
+    scenarios = tuple(_scenario(e) for e in root.tables("scenario", required=True))
+    labels = [s.label for s in scenarios]
+    if len(set(labels)) != len(labels):
+        raise root.error("scenario", f"duplicate labels in {labels} (set label = ...)")
+    healthy = _healthy(root.table("healthy"), labels) if root.has("healthy") else None
+    root.allow("healthy")
+    return CampaignSpec(
+        name=head.string("name"),
+        description=head.string("description", ""),
+        source=root.file,
+        seeds=_seeds(head),
+        variants=_variants(head, root),
+        scenarios=scenarios,
+        faults=_faults(root.table("faults")),
+        healthy=healthy,
+        duration_s=head.number("duration", None, positive=True),
+        metrics=root.table("metrics").dataclass(
+            MetricParams, choices={"harm_statistic": ("max", "rms")}
+        ),
+        base=base,
     )
-
-
-def _metrics(table: Any, where: str) -> MetricParams:
-    t = strict(table, {f.name for f in fields(MetricParams)}, f"{where}.metrics")
-    try:
-        return MetricParams(**t)
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"{where}.metrics: {e}") from e
 
 
 def parse_campaign(data: dict[str, Any], where: str, base: Path | None = None) -> CampaignSpec:
-    top = ("campaign", "scenario", "variant", "faults", "healthy", "metrics")
-    strict(data, top, where)
-    head = strict(
-        data.get("campaign"),
-        ("name", "description", "seeds", "seed_count", "modes", "duration"),
-        f"{where}.campaign",
-    )
-    if not isinstance(head.get("name"), str) or not head["name"]:
-        raise ConfigError(f"{where}.campaign.name: missing")
-    entries = data.get("scenario")
-    if not isinstance(entries, list) or not entries:
-        raise ConfigError(f"{where}.scenario: expected at least one [[scenario]]")
-    scenarios = tuple(_scenario(e, f"{where}.scenario[{i}]") for i, e in enumerate(entries))
-    labels = [s.label for s in scenarios]
-    if len(set(labels)) != len(labels):
-        raise ConfigError(f"{where}.scenario: duplicate labels in {labels} (set label = ...)")
-    healthy = None if "healthy" not in data else _healthy(data["healthy"], where)
-    if healthy is not None and not set(healthy.scenarios or ()) <= set(labels):
-        raise ConfigError(f"{where}.healthy.scenarios: {healthy.scenarios} not all in {labels}")
-    return CampaignSpec(
-        name=head["name"],
-        description=str(head.get("description", "")),
-        source=where,
-        seeds=_seeds(head, f"{where}.campaign"),
-        variants=_variants(head.get("modes", ["ftcap"]), data.get("variant", {}), where),
-        scenarios=scenarios,
-        faults=_faults(data.get("faults", {}), where),
-        healthy=healthy,
-        duration_s=_number(head, "duration", f"{where}.campaign"),
-        metrics=_metrics(data.get("metrics", {}), where),
-        base=base,
-    )
+    """A campaign from a parsed TOML document (``where`` names the file in messages)."""
+    with Table(data, where) as root:
+        return campaign_from(root, base)
 
 
 def shipped_campaigns() -> list[str]:

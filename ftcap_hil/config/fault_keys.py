@@ -1,54 +1,68 @@
-"""The time-profile keys of a scenario's ``[[fault]]`` entry: ``kind``, ``ramp_s``, ``on_s``,
-``off_s`` (see ``docs/scenarios.md``); the rest of the entry is read by ``scenario.py``.
+"""A scenario's ``[[fault]]`` entries -> :class:`~ftcap_hil.core.faults.FaultSchedule`.
 
-``kind`` is one of ``step`` (default), ``ramp``, ``intermittent``, ``stuck``, ``bias``
-(:class:`~ftcap_hil.core.faults.EventKind`); ``ramp_s`` (s, > 0) belongs to a ramp,
-``on_s`` and ``off_s`` (s, > 0) to an intermittent fault, which also needs ``until``.
+Each entry: ``from``, optional ``until`` (s, or steps for the linear plant; absent:
+forever), and ``delta`` / ``bias`` for all m thrusters (vectors) or for ``thruster``
+(1-based) alone (scalars); its time profile is ``kind``: ``step`` (default), ``ramp``,
+``intermittent``, ``stuck``, ``bias`` (:class:`~ftcap_hil.core.faults.EventKind`).
+``ramp_s`` (s, > 0) belongs to a ramp, ``on_s`` and ``off_s`` (s, > 0) to an intermittent
+fault, which also needs ``until`` (see ``docs/scenarios.md``).
 """
 
 from __future__ import annotations
 
-from typing import Any
+import math
 
-from ftcap_hil.config.tables import number
-from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.faults import EventKind, FaultEvent
+from ftcap_hil.config.tables import Table
+from ftcap_hil.core.faults import EventKind, FaultEvent, FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 
 PROFILE_KEYS = {EventKind.RAMP: ("ramp_s",), EventKind.INTERMITTENT: ("on_s", "off_s")}
+ALL_PROFILE_KEYS = tuple(key for keys in PROFILE_KEYS.values() for key in keys)
 
 
-def _kind(entry: dict[str, Any], where: str) -> EventKind:
-    name = entry.get("kind", EventKind.STEP.value)
-    try:
-        return EventKind(name)
-    except ValueError:
-        known = [k.value for k in EventKind]
-        raise ConfigError(f"{where}.kind: {name!r} not one of {known}") from None
+def _owner(key: str) -> str:
+    return next(k.value for k, keys in PROFILE_KEYS.items() if key in keys)
 
 
 def fault_event(
-    entry: dict[str, Any],
-    where: str,
+    t: Table,
     start: float,
     end: float,
     thruster: int | None,
     delta: FloatArray | float | None,
     bias: FloatArray | float | None,
 ) -> FaultEvent:
-    """The :class:`FaultEvent` of one ``[[fault]]`` ``entry`` (``where`` names it in
-    errors), its time profile read from the entry's profile keys."""
-    kind = _kind(entry, where)
+    """The :class:`FaultEvent` of the entry ``t``, its time profile read from ``kind`` and
+    the profile keys (a key of another kind's profile is refused)."""
+    kind = t.enum("kind", EventKind, EventKind.STEP)
     own = PROFILE_KEYS.get(kind, ())
-    for other in {key for keys in PROFILE_KEYS.values() for key in keys} - set(own):
-        if other in entry:
-            raise ConfigError(f"{where}.{other}: only for kind = {_owner(other)!r}")
-    times = {key: number(entry, key, where) for key in own}
+    for other in ALL_PROFILE_KEYS:
+        if other not in own and t.has(other):
+            raise t.error(other, f"only for kind = {_owner(other)!r}")
+    t.allow(*ALL_PROFILE_KEYS)
+    times = {key: t.number(key) for key in own}
     try:
         return FaultEvent(start, end, thruster, delta, bias, kind, **times)
     except ValueError as e:
-        raise ConfigError(f"{where}: {e}") from None
+        raise t.error(None, str(e)) from None
 
 
-def _owner(key: str) -> str:
-    return next(k.value for k, keys in PROFILE_KEYS.items() if key in keys)
+def fault_event_from(t: Table, m: int) -> FaultEvent:
+    """One ``[[fault]]`` entry of a schedule for m thrusters (module docstring)."""
+    start = t.number("from")
+    end = t.number("until", math.inf)
+    if end <= start:
+        raise t.error("until", f"expected a time after from = {start:g}, got {end:g}")
+    thruster = t.integer("thruster", None, lo=1, hi=m)
+    t.allow("delta", "bias")
+    if thruster is None:
+        delta = t.vector("delta", m, lo=0.0, hi=1.0) if t.has("delta") else None
+        bias = t.vector("bias", m) if t.has("bias") else None
+        return fault_event(t, start, end, None, delta, bias)
+    d, b = t.number("delta", None, lo=0.0, hi=1.0), t.number("bias", None)
+    return fault_event(t, start, end, thruster - 1, d, b)
+
+
+def fault_schedule_from(tables: list[Table], m: int) -> FaultSchedule:
+    """The ``[[fault]]`` entries of a file, in order (later ones win where they act)."""
+    return FaultSchedule(m, tuple(fault_event_from(t, m) for t in tables))

@@ -26,51 +26,22 @@ beyond reading the files.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ftcap_hil.config.scenario import SHIPPED, parse_scenario
-from ftcap_hil.config.toml import read_toml, shipped_names
+from ftcap_hil.config.realistic import is_realistic, parse_realistic
+from ftcap_hil.config.scenario import REPLACEABLE, SHIPPED, scenario_from
+from ftcap_hil.config.tables import Table
+from ftcap_hil.config.toml import TomlFile, read_toml, shipped_names
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
+from ftcap_hil.runtime.ground_station import GcsSettings, Mission
 
 MISSIONS = "ftcap_hil.data.hil.missions"
-MISSION_KEYS = {"name", "description", "scenario", "duration", "period", "mode"}
-GCS_KEYS = {"connect_timeout_s", "odometry_timeout_s", "wrench_limit", "clear_faults_at_end"}
-REPLACEABLE = ("controller", "reference", "fault")
-
-
-@dataclass(frozen=True)
-class GcsSettings:
-    connect_timeout_s: float = 20.0
-    odometry_timeout_s: float = 5.0
-    wrench_limit: tuple[float, float, float] = (1000.0, 1000.0, 1000.0)  # the allocator's
-    clear_faults_at_end: bool = True
-
-
-@dataclass(frozen=True)
-class Mission:
-    name: str
-    description: str
-    scenario: Scenario  # reference, faults (truth), controller; duration_s = the mission's
-    period_s: float  # control period T_s
-    mode: Mode | None  # None: fly with whatever mode the allocator is in
-    gcs: GcsSettings
-    source: str
-
-    @property
-    def duration_s(self) -> float:
-        return self.scenario.duration_s
-
-    def with_duration(self, duration_s: float) -> Mission:
-        if not (math.isfinite(duration_s) and duration_s > 0):
-            raise ConfigError(f"duration: expected a positive number of seconds, got {duration_s}")
-        return replace(self, scenario=replace(self.scenario, duration_s=float(duration_s)))
+# The keys mission_from and gcs_settings_from read (tests/docker checks --set against them).
+MISSION_KEYS = ("name", "description", "scenario", "duration", "period", "mode")
+GCS_KEYS = ("connect_timeout_s", "odometry_timeout_s", "wrench_limit", "clear_faults_at_end")
 
 
 def shipped_missions() -> list[str]:
@@ -78,80 +49,62 @@ def shipped_missions() -> list[str]:
     return shipped_names(MISSIONS)
 
 
-def _scenario_data(ref: Any, base: Path | None, where: str) -> tuple[dict[str, Any], str]:
-    if not isinstance(ref, str) or not ref:
-        raise ConfigError(f"{where}.mission.scenario: expected a name or a path, got {ref!r}")
+def _scenario_doc(head: Table, base: Path | None) -> TomlFile:
+    ref = head.string("scenario")
     if base is not None and (base / ref).is_file():
         ref = str(base / ref)
-    doc = read_toml(ref, SHIPPED, what=f"{where}.mission.scenario")
-    return doc.data, doc.source
+    try:
+        return read_toml(ref, SHIPPED, what="scenario")
+    except ConfigError as e:
+        raise head.error("scenario", str(e)) from e
 
 
-def _positive(table: dict[str, Any], key: str, where: str, default: float) -> float:
-    v = table.get(key, default)
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
-        raise ConfigError(f"{where}.{key}: expected a positive number, got {v!r}")
-    return float(v)
-
-
-def _gcs_settings(table: Any, where: str) -> GcsSettings:
-    if not isinstance(table, dict):
-        raise ConfigError(f"{where}: expected a table")
-    if unknown := set(table) - GCS_KEYS:
-        raise ConfigError(f"{where}: unknown keys {sorted(unknown)} (known: {sorted(GCS_KEYS)})")
+def gcs_settings_from(t: Table) -> GcsSettings:
+    """``[gcs]``: every key optional (GcsSettings' defaults)."""
     d = GcsSettings()
-    limit = table.get("wrench_limit", list(d.wrench_limit))
-    arr = np.asarray(limit, dtype=np.float64) if isinstance(limit, list) else np.zeros(0)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
-        raise ConfigError(f"{where}.wrench_limit: expected 3 positive numbers, got {limit!r}")
-    clear = table.get("clear_faults_at_end", d.clear_faults_at_end)
-    if not isinstance(clear, bool):
-        raise ConfigError(f"{where}.clear_faults_at_end: expected true/false, got {clear!r}")
+    limit = t.vector("wrench_limit", 3, d.wrench_limit, positive=True)
     return GcsSettings(
-        _positive(table, "connect_timeout_s", where, d.connect_timeout_s),
-        _positive(table, "odometry_timeout_s", where, d.odometry_timeout_s),
-        (float(arr[0]), float(arr[1]), float(arr[2])),
-        clear,
+        t.number("connect_timeout_s", d.connect_timeout_s, positive=True),
+        t.number("odometry_timeout_s", d.odometry_timeout_s, positive=True),
+        (float(limit[0]), float(limit[1]), float(limit[2])),
+        t.boolean("clear_faults_at_end", d.clear_faults_at_end),
     )
 
 
-def _mode(value: Any, where: str) -> Mode | None:
-    if value is None:
-        return None
-    allowed = [m.value for m in Mode if m is not Mode.ORACLE]
-    if value not in allowed:
-        raise ConfigError(f"{where}.mission.mode: expected one of {allowed}, got {value!r}")
-    return Mode(value)
+def mission_from(root: Table, base: Path | None = None) -> Mission:
+    """A mission from the top level of its file; the scenario it names is read (strictly)
+    from ``base`` (the mission file's folder) or the shipped scenarios."""
+    head = root.table("mission", required=True)
+    root.allow(*REPLACEABLE)
+    sc_doc = _scenario_doc(head, base)
+    if is_realistic(sc_doc.data):  # its own reader: the mission's tables merged in
+        merged = {**sc_doc.data, **{k: root.data[k] for k in REPLACEABLE if root.has(k)}}
+        sc = parse_realistic(merged, f"{root.file} (scenario {sc_doc.source})")
+    else:
+        with Table.document(sc_doc) as sc_root:
+            sc = scenario_from(sc_root, root)
+    if sc.time_unit != "s":
+        raise head.error("scenario", f"{sc_doc.source!r} is not a vessel scenario")
+    name = head.string("name", sc.name)
+    mode = head.enum("mode", Mode, exclude=[Mode.ORACLE]) if head.has("mode") else None
+    head.allow("mode")
+    return Mission(
+        name=name,
+        description=head.string("description", sc.description),
+        scenario=replace(  # plots and results name it
+            sc, name=name, duration_s=head.number("duration", sc.duration_s, positive=True)
+        ),
+        period_s=head.number("period", sc.dt_s, positive=True),
+        mode=mode,
+        gcs=gcs_settings_from(root.table("gcs")),
+        source=root.file,
+    )
 
 
 def parse_mission(data: dict[str, Any], where: str, base: Path | None = None) -> Mission:
-    head = data.get("mission")
-    if not isinstance(head, dict):
-        raise ConfigError(f"{where}.mission: missing table")
-    if unknown := set(head) - MISSION_KEYS:
-        raise ConfigError(
-            f"{where}.mission: unknown keys {sorted(unknown)} (known: {sorted(MISSION_KEYS)})"
-        )
-    if unknown := set(data) - {"mission", "gcs", *REPLACEABLE}:
-        raise ConfigError(f"{where}: unknown tables {sorted(unknown)}")
-    sc_data, sc_where = _scenario_data(head.get("scenario"), base, where)
-    for key in REPLACEABLE:
-        if key in data:
-            sc_data[key] = data[key]
-    sc = parse_scenario(sc_data, f"{where} (scenario {sc_where})")
-    if sc.time_unit != "s":
-        raise ConfigError(f"{where}.mission.scenario: {sc_where!r} is not a vessel scenario")
-    duration = _positive(head, "duration", f"{where}.mission", sc.duration_s)
-    name = str(head.get("name", sc.name))
-    return Mission(
-        name=name,
-        description=str(head.get("description", sc.description)),
-        scenario=replace(sc, name=name, duration_s=duration),  # plots and results name it
-        period_s=_positive(head, "period", f"{where}.mission", sc.dt_s),
-        mode=_mode(head.get("mode"), where),
-        gcs=_gcs_settings(data.get("gcs", {}), f"{where}.gcs"),
-        source=where,
-    )
+    """A mission from a parsed TOML document (``where`` names the file in messages)."""
+    with Table(data, where) as root:
+        return mission_from(root, base)
 
 
 def load_mission(name_or_path: str | Path, overrides: list[str] | None = None) -> Mission:

@@ -5,9 +5,10 @@ A preset file states one vessel's truth: the 3-DOF model (``[rigid_body]``,
 (``[hull]``, ``[wind_coefficients]``), the thrusters (``[[thruster]]`` with their lag
 ``time_constant_s``), realistic environment levels (``[environment.current|wind|waves]``),
 sensor noise levels (``[sensors]``) and the allocator's model error (``[mismatch]``).
-Every key is checked: an unknown one is an error naming the file, the table, the key and
-the nearest valid key. Angles are degrees in the file (``_deg``) and radians here.
-``apply_mismatch`` turns a preset into the model the allocator is given.
+Read with :class:`~ftcap_hil.config.tables.Table`: an unknown key is an error naming the
+file, the table, the key and the nearest valid key. Angles are degrees in the file
+(``_deg``) and radians here. ``apply_mismatch`` turns a preset into the model the allocator
+is given.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.geometry import Thruster, ThrusterSet, effectiveness
@@ -36,10 +38,6 @@ from sim.environment import (
 )
 
 PRESETS = "ftcap_hil.data.vessels"
-TOP: tuple[str, ...] = ("preset", "rigid_body", "added_mass", "damping", "model", "hull")
-TOP += ("wind_coefficients", "thruster", "environment", "sensors", "mismatch")
-THRUSTER_KEYS: tuple[str, ...] = ("name", "x", "y", "angle_deg", "u_min", "u_max")
-THRUSTER_KEYS += ("time_constant_s", "rate_max", "step_max")
 
 
 @dataclass(frozen=True)
@@ -102,140 +100,84 @@ def preset_names() -> list[str]:
     return shipped_names(PRESETS)
 
 
-def strict_keys(table: Mapping[str, Any], allowed: tuple[str, ...], where: str) -> None:
-    """ConfigError for the first key of ``table`` not in ``allowed``, with the nearest."""
-    for key in table:
-        if key not in allowed:
-            near = difflib.get_close_matches(key, allowed, n=1)
-            hint = f" (did you mean {near[0]!r}?)" if near else f" (known: {', '.join(allowed)})"
-            raise ConfigError(f"{where}: unknown key {key!r}{hint}")
+def _numbers(t: Table, keys: tuple[str, ...]) -> dict[str, float]:
+    """The ``keys`` given in ``t`` as finite floats (any of them may be absent)."""
+    t.allow(*keys)
+    return {k: t.number(k) for k in keys if t.has(k)}
 
 
-def _sub(table: Mapping[str, Any], key: str, where: str, required: bool = True) -> dict[str, Any]:
-    value = table.get(key, None if required else {})
-    if not isinstance(value, dict):
-        raise ConfigError(f"{where}.{key}: expected a table, got {value!r}")
-    return value
-
-
-def _num(table: Mapping[str, Any], key: str, where: str, default: float | None = None) -> float:
-    if key not in table:
-        if default is None:
-            raise ConfigError(f"{where}.{key}: missing")
-        return default
-    v = table[key]
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise ConfigError(f"{where}.{key}: expected a finite number, got {v!r}")
-    return float(v)
-
-
-def _numbers(table: Mapping[str, Any], where: str, allowed: tuple[str, ...]) -> dict[str, float]:
-    strict_keys(table, allowed, where)
-    return {k: _num(table, k, where) for k in table}
-
-
-def _dataclass_keys(cls: type) -> tuple[str, ...]:
-    return tuple(f.name for f in fields(cls) if f.init)
-
-
-def _vessel(data: Mapping[str, Any], where: str) -> Vessel3DOF:
+def _vessel(root: Table) -> Vessel3DOF:
     values: dict[str, Any] = {}
     for table, keys in (
         ("rigid_body", ("mass_kg", "iz_kgm2", "xg_m")),
         ("added_mass", ("X_udot", "Y_vdot", "Y_rdot", "N_vdot", "N_rdot")),
         ("damping", DAMPING_KEYS),
     ):
-        values.update(_numbers(_sub(data, table, where), f"{where}.{table}", keys))
-    model = _sub(data, "model", where, required=False)
-    strict_keys(model, ("coriolis",), f"{where}.model")
-    if not isinstance(model.get("coriolis", True), bool):
-        raise ConfigError(f"{where}.model.coriolis: expected true or false")
+        values.update(_numbers(root.table(table, required=True), keys))
+    coriolis = root.table("model").boolean("coriolis", True)
     try:
-        return Vessel3DOF(**values, coriolis=model.get("coriolis", True))
+        return Vessel3DOF(**values, coriolis=coriolis)
     except (TypeError, ValueError) as e:
-        raise ConfigError(f"{where}: {e}") from e
+        raise root.error(None, f"vessel model: {e}") from e
 
 
-def _thruster(t: Any, where: str) -> tuple[Thruster, float]:
-    if not isinstance(t, dict):
-        raise ConfigError(f"{where}: expected a table, got {t!r}")
-    strict_keys(t, THRUSTER_KEYS, where)
-    if not isinstance(t.get("name"), str) or not t["name"]:
-        raise ConfigError(f"{where}.name: expected a non-empty string")
+def _thruster(t: Table) -> tuple[Thruster, float]:
     th = Thruster(
-        name=t["name"],
-        x_m=_num(t, "x", where),
-        y_m=_num(t, "y", where),
-        angle_rad=math.radians(_num(t, "angle_deg", where)),
-        u_min=_num(t, "u_min", where),
-        u_max=_num(t, "u_max", where),
-        rate_max=_num(t, "rate_max", where) if "rate_max" in t else None,
-        step_max=_num(t, "step_max", where) if "step_max" in t else None,
+        name=t.string("name"),
+        x_m=t.number("x"),
+        y_m=t.number("y"),
+        angle_rad=math.radians(t.number("angle_deg")),
+        u_min=t.number("u_min"),
+        u_max=t.number("u_max"),
+        rate_max=t.number("rate_max", None, positive=True),
+        step_max=t.number("step_max", None, positive=True),
     )
     if not th.u_min <= 0.0 <= th.u_max or th.u_min == th.u_max:
-        raise ConfigError(f"{where}: need u_min <= 0 <= u_max, got {th.u_min}, {th.u_max}")
-    lag = _num(t, "time_constant_s", where)
-    if lag < 0.0:
-        raise ConfigError(f"{where}.time_constant_s: must be >= 0, got {lag}")
-    return th, lag
+        raise t.error(None, f"need u_min <= 0 <= u_max, got {th.u_min}, {th.u_max}")
+    return th, t.number("time_constant_s", lo=0.0)
 
 
-def _thrusters(data: Mapping[str, Any], where: str) -> tuple[ThrusterSet, FloatArray]:
-    entries = data.get("thruster")
-    if not isinstance(entries, list) or not entries:
-        raise ConfigError(f"{where}.thruster: expected a non-empty list of [[thruster]]")
-    parsed = [_thruster(t, f"{where}.thruster[{i}]") for i, t in enumerate(entries)]
+def _thrusters(root: Table) -> tuple[ThrusterSet, FloatArray]:
+    parsed = [_thruster(t) for t in root.tables("thruster", required=True)]
     names = [th.name for th, _ in parsed]
     if len(set(names)) != len(names):
-        raise ConfigError(f"{where}.thruster: duplicate names in {names}")
+        raise root.error("thruster", f"duplicate names in {names}")
     return ThrusterSet(tuple(th for th, _ in parsed)), np.array([lag for _, lag in parsed])
 
 
-def _angles(values: dict[str, Any], keys: tuple[str, ...]) -> dict[str, Any]:
-    """``*_deg`` file keys -> ``*_rad`` fields."""
-    return {
-        (k[:-4] + "_rad" if k.endswith("_deg") else k): (
-            math.radians(v) if k.endswith("_deg") else v
-        )
-        for k, v in values.items()
-        if k in keys
-    }
+def _fields_in_degrees(t: Table, cls: type, exclude: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The fields of ``cls`` given in ``t``, a ``*_rad`` field read from ``*_deg`` degrees;
+    int fields are integers >= 1, ``force_factor`` is [X, Y, N] factors."""
+    out: dict[str, Any] = {}
+    for f in fields(cls):
+        if not f.init or f.name in exclude:
+            continue
+        key = f.name[:-4] + "_deg" if f.name.endswith("_rad") else f.name
+        t.allow(key)
+        if not t.has(key):
+            continue
+        if key == "force_factor":
+            out[f.name] = tuple(float(x) for x in t.vector(key, 3))
+        elif f.type in (int, "int"):
+            out[f.name] = t.integer(key, lo=1)
+        else:
+            v = t.number(key)
+            out[f.name] = math.radians(v) if key.endswith("_deg") else v
+    return out
 
 
-def _file_keys(cls: type, exclude: tuple[str, ...] = ()) -> tuple[str, ...]:
-    keys = [k[:-4] + "_deg" if k.endswith("_rad") else k for k in _dataclass_keys(cls)]
-    return tuple(k for k in keys if k not in exclude)
-
-
-def _environment(data: Mapping[str, Any], where: str, seed: int) -> EnvironmentConfig:
-    env = _sub(data, "environment", where, required=False)
-    w = f"{where}.environment"
-    strict_keys(env, ("current", "wind", "waves"), w)
-    coef_table = _sub(data, "wind_coefficients", where, False)
-    coef_values: dict[str, Any] = _numbers(
-        coef_table, f"{where}.wind_coefficients", _dataclass_keys(WindCoefficients)
-    )
-    coef = WindCoefficients(**coef_values)
+def _environment(root: Table, seed: int) -> EnvironmentConfig:
+    env = root.table("environment")
+    coef = WindCoefficients(**_numbers(root.table("wind_coefficients"), _keys(WindCoefficients)))
     parts: dict[str, Any] = {}
     classes: tuple[tuple[str, type], ...] = (
         ("current", CurrentConfig),
         ("wind", WindConfig),
         ("waves", WaveConfig),
     )
-    for key, cls in classes:
-        allowed = _file_keys(cls, exclude=("coefficients",))
-        table = dict(_sub(env, key, w, False))
-        factor = table.pop("force_factor", None) if key == "waves" else None
-        values: dict[str, Any] = _numbers(table, f"{w}.{key}", allowed)
-        if factor is not None:
-            values["force_factor"] = _triple(factor, f"{w}.{key}.force_factor")
-        if "n_components" in values:
-            n = values["n_components"]
-            if n != int(n) or n < 1:
-                raise ConfigError(f"{w}.{key}.n_components: expected an integer >= 1, got {n}")
-            values["n_components"] = int(n)
-        parts[key] = cls(**_angles(values, allowed))
     try:
+        for key, cls in classes:
+            parts[key] = cls(**_fields_in_degrees(env.table(key), cls, exclude=("coefficients",)))
         return EnvironmentConfig(
             current=parts["current"],
             wind=replace(parts["wind"], coefficients=coef),
@@ -243,47 +185,34 @@ def _environment(data: Mapping[str, Any], where: str, seed: int) -> EnvironmentC
             seed=seed,
         )
     except ValueError as e:
-        raise ConfigError(f"{w}: {e}") from e
+        raise env.error(None, str(e)) from e
 
 
-def _triple(v: Any, where: str) -> tuple[float, float, float]:
-    if not (isinstance(v, list) and len(v) == 3):
-        raise ConfigError(f"{where}: expected [X, Y, N] factors, got {v!r}")
-    x, y, n = (_num({"v": e}, "v", where) for e in v)
-    return (x, y, n)
+def _keys(cls: type) -> tuple[str, ...]:
+    return tuple(f.name for f in fields(cls) if f.init)
 
 
-def _sensors(data: Mapping[str, Any], where: str) -> SensorLevels:
-    allowed = ("position_std_m", "heading_std_deg", "velocity_std_m_s", "yaw_rate_std_deg_s")
-    v = _numbers(_sub(data, "sensors", where), f"{where}.sensors", allowed)
-    missing = [k for k in allowed if k not in v]
-    if missing or any(x < 0.0 for x in v.values()):
-        raise ConfigError(f"{where}.sensors: need {list(allowed)} >= 0 (missing {missing})")
+def _sensors(root: Table) -> SensorLevels:
+    t = root.table("sensors", required=True)
     return SensorLevels(
-        v["position_std_m"],
-        math.radians(v["heading_std_deg"]),
-        v["velocity_std_m_s"],
-        math.radians(v["yaw_rate_std_deg_s"]),
+        t.number("position_std_m", lo=0.0),
+        math.radians(t.number("heading_std_deg", lo=0.0)),
+        t.number("velocity_std_m_s", lo=0.0),
+        math.radians(t.number("yaw_rate_std_deg_s", lo=0.0)),
     )
 
 
-def _mismatch(data: Mapping[str, Any], where: str) -> Mismatch:
-    t = _sub(data, "mismatch", where, required=False)
-    w = f"{where}.mismatch"
-    strict_keys(t, ("mass", "damping", "angle_deg", "position_m"), w)
-    angles: dict[str | int, float] = {
-        k: _num(_sub(t, "angle_deg", w, False), k, f"{w}.angle_deg")
-        for k in _sub(t, "angle_deg", w, False)
-    }
+def _mismatch(root: Table) -> Mismatch:
+    """``[mismatch]``: mass, damping (fractions); angle_deg and position_m tables keyed by
+    thruster name (checked against the thrusters by :func:`_resolve`)."""
+    t = root.table("mismatch")
+    angles_t, offsets_t = t.table("angle_deg"), t.table("position_m")
+    angles: dict[str | int, float] = {k: angles_t.number(k) for k in angles_t.data}
     offsets: dict[str | int, tuple[float, float]] = {}
-    for k, v in _sub(t, "position_m", w, False).items():
-        if not (isinstance(v, list) and len(v) == 2):
-            raise ConfigError(f"{w}.position_m.{k}: expected [dx, dy], got {v!r}")
-        offsets[k] = (
-            _num({"dx": v[0]}, "dx", f"{w}.position_m.{k}"),
-            _num({"dy": v[1]}, "dy", f"{w}.position_m.{k}"),
-        )
-    return Mismatch(_num(t, "mass", w, 0.0), _num(t, "damping", w, 0.0), angles, offsets)
+    for k in offsets_t.data:
+        dx, dy = offsets_t.vector(k, 2)
+        offsets[k] = (float(dx), float(dy))
+    return Mismatch(t.number("mass", 0.0), t.number("damping", 0.0), angles, offsets)
 
 
 def load_preset(
@@ -292,30 +221,27 @@ def load_preset(
     """A preset by shipped name (``preset_names()``) or path; ``seed`` goes into its
     EnvironmentConfig. Raises ConfigError naming the file, table and key on bad input."""
     doc = read_toml(name_or_path, PRESETS, overrides, what="vessel preset")
-    data, where = doc.data, doc.source
-    strict_keys(data, TOP, where)
-    head = _sub(data, "preset", where)
-    strict_keys(head, ("name", "description"), f"{where}.preset")
-    thrusters, lags = _thrusters(data, where)
-    hull_keys = _dataclass_keys(HullGeometry)
-    hull_values = _numbers(_sub(data, "hull", where), f"{where}.hull", hull_keys)
-    try:
-        hull = HullGeometry(**hull_values)
-    except TypeError as e:
-        raise ConfigError(f"{where}.hull: {e}") from e
-    preset = VesselPreset(
-        name=str(head.get("name", where)),
-        description=str(head.get("description", "")),
-        source=where,
-        vessel=_vessel(data, where),
-        thrusters=thrusters,
-        time_constants_s=lags,
-        hull=hull,
-        environment=_environment(data, where, seed),
-        sensors=_sensors(data, where),
-        mismatch=_mismatch(data, where),
-    )
-    _resolve(preset.thrusters, preset.mismatch, where)
+    with Table.document(doc) as root:
+        head = root.table("preset", required=True)
+        thrusters, lags = _thrusters(root)
+        hull_t = root.table("hull", required=True)
+        try:
+            hull = HullGeometry(**_numbers(hull_t, _keys(HullGeometry)))
+        except TypeError as e:
+            raise hull_t.error(None, str(e)) from e
+        preset = VesselPreset(
+            name=head.string("name", doc.source),
+            description=head.string("description", ""),
+            source=doc.source,
+            vessel=_vessel(root),
+            thrusters=thrusters,
+            time_constants_s=lags,
+            hull=hull,
+            environment=_environment(root, seed),
+            sensors=_sensors(root),
+            mismatch=_mismatch(root),
+        )
+    _resolve(preset.thrusters, preset.mismatch, doc.source)
     return preset
 
 

@@ -53,8 +53,10 @@ from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import TomlFile
 from ftcap_hil.core.controllers import PoseController
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.estimator import EstimatorConfig
 from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.scenario import Scenario
+from sim.environment import CurrentConfig, Environment, WindConfig
 from sim.sensors import SensorConfig
 from sim.thrusters import ThrusterBankConfig
 from sim.truth import TruthConfig
@@ -84,16 +86,17 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     plant_t.finish()
     told = _allocator_model(preset, root.table("mismatch"), inversion)
     sc = parse_scenario(_common_tables(data, told.thrusters), where)
-    controller = _controller(root.table("controller"), np.diag(told.vessel.mass_matrix))
     truth, sensor = _truth(preset, root, seed, substeps, sc.dt_s)
+    controller = _controller(root.table("controller"), np.diag(told.vessel.mass_matrix))
     core = sc.core
     if truth.bank.time_constant_s.any():  # the allocator is told the thrusters' lag
         core = dataclasses.replace(core, thruster_lag_s=tuple(truth.bank.time_constant_s.tolist()))
     if core.estimator.measurement_std is None and sensor is not None:
-        std = tuple(float(v) for v in sensor.noise_std[3:6])
+        std = tuple(float(v) for v in sensor.noise_std)  # pose and velocities: PoseStep
         core = dataclasses.replace(
             core, estimator=dataclasses.replace(core.estimator, measurement_std=std)
         )
+    core = dataclasses.replace(core, estimator=_told_waves(core.estimator, truth))
     est_period = _estimation_period(data, where, sc.dt_s)
     return dataclasses.replace(
         sc,
@@ -106,6 +109,22 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
         truth=truth,
         length_m=preset.hull.l_oa_m,
     )
+
+
+def _told_waves(est: EstimatorConfig, truth: TruthConfig) -> EstimatorConfig:
+    """The estimator is told the sea state as a DP system's wave model is tuned: the peak
+    period and the first-order load's level per axis (here measured over 10 minutes at rest
+    on another realisation of the same sea state: a different seed), unless the file sets
+    ``[estimator] wave_period_s``."""
+    env = truth.environment
+    if env is None or truth.hull is None or not env.waves.enabled or est.wave_period_s > 0.0:
+        return est
+    sea = Environment(dataclasses.replace(env, current=CurrentConfig(), wind=WindConfig()),
+                      truth.hull, seed=env.seed + 1)  # fmt: skip
+    t = np.arange(0.0, 600.0, env.waves.tp_s / 20.0)
+    loads = sea.wave_wrench(t, np.zeros(6))  # (n, 3): the sea's components at once
+    std = est.wave_force_std or tuple(float(v) for v in loads.std(axis=0))
+    return dataclasses.replace(est, wave_period_s=env.waves.tp_s, wave_force_std=std)
 
 
 def _estimation_period(data: dict[str, Any], where: str, dt_s: float) -> float | None:

@@ -1,149 +1,115 @@
 """Scenario files (TOML): plant, thrusters, reference, faults, controller, allocator settings.
 
 The format is documented in ``docs/scenarios.md``; shipped files live in
-``ftcap_hil/data/scenarios``. Every error names the offending key and value.
+``ftcap_hil/data/scenarios``. Read with :class:`~ftcap_hil.config.tables.Table`: every error
+names the file, the table and the key, and an unknown key or table is an error.
 """
 
 from __future__ import annotations
 
-import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ftcap_hil.config.fault_keys import fault_event
+from ftcap_hil.config.fault_keys import fault_schedule_from
 from ftcap_hil.config.realistic import is_realistic, parse_realistic
-from ftcap_hil.config.tables import dataclass_from_table, get, number, vector
+from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
-from ftcap_hil.config.vessel import plant_from_tables
+from ftcap_hil.config.vessel import plant_from
 from ftcap_hil.core.allocator import AllocatorConfig
 from ftcap_hil.core.controllers import PoseController, StateFeedback
 from ftcap_hil.core.cycle import CoreConfig
-from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.estimator import EstimatorConfig
 from ftcap_hil.core.excitation import ExcitationConfig
-from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.plants import LinearPlant
+from ftcap_hil.core.qp import available_backends
 from ftcap_hil.core.scenario import Scenario, Segment
 from ftcap_hil.core.status import Mode
 
-
-def _faults(entries: list[dict[str, Any]], m: int, where: str) -> FaultSchedule:
-    events = []
-    for i, ev in enumerate(entries):
-        w = f"{where}.fault[{i}]"
-        thr = ev.get("thruster")
-        if thr is not None and not (isinstance(thr, int) and 1 <= thr <= m):
-            raise ConfigError(f"{w}.thruster: expected 1..{m} (1-based), got {thr!r}")
-        size = 1 if thr is not None else m
-        delta = vector(ev["delta"], f"{w}.delta", size) if "delta" in ev else None
-        bias = vector(ev["bias"], f"{w}.bias", size) if "bias" in ev else None
-        if delta is not None and np.any((delta < 0) | (delta > 1)):
-            raise ConfigError(f"{w}.delta: must lie in [0, 1], got {ev['delta']!r}")
-        events.append(
-            fault_event(
-                ev,
-                w,
-                number(ev, "from", w),
-                number(ev, "until", w) if "until" in ev else math.inf,
-                None if thr is None else thr - 1,
-                None if delta is None else (delta[0] if thr is not None else delta),
-                None if bias is None else (bias[0] if thr is not None else bias),
-            )
-        )
-    return FaultSchedule(m, tuple(events))
+SHIPPED = "ftcap_hil.data.scenarios"
+INTEGRATORS = ("euler", "rk4")
+REPLACEABLE = ("controller", "reference", "fault")  # tables a mission may give instead
 
 
-def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
-    if is_realistic(data):
-        return parse_realistic(data, where)
-    head = get(data, "scenario", where)
-    plant, ths, B = plant_from_tables(data, where)
-    k = B.shape[0]
-    ctl_t = data.get("controller", {})
-    if isinstance(plant, LinearPlant):
-        controller: StateFeedback | PoseController = StateFeedback(
-            gain=number(ctl_t, "K", f"{where}.controller", -0.6), a=plant.a, b_v=plant.b_v
-        )
-        ref_len, x_len, unit = 1, 1, "step"
-    else:
-        controller = PoseController(
-            kp=number(ctl_t, "kp", f"{where}.controller", 0.75),
-            k_eta=number(ctl_t, "k_eta", f"{where}.controller", 0.63),
-        )
-        ref_len, x_len, unit = 3, 6, "s"
-    refs = get(data, "reference", where)
-    reference = tuple(
-        Segment(
-            number(r, "from", f"{where}.reference[{i}]"),
-            vector(
-                get(r, "value", f"{where}.reference[{i}]"),
-                f"{where}.reference[{i}].value",
-                ref_len,
-            ),
-        )
-        for i, r in enumerate(refs)
-    )
-    mode_name = head.get("mode", "ftcap")
-    try:
-        mode = Mode(mode_name)
-    except ValueError:
-        raise ConfigError(
-            f"{where}.scenario.mode: {mode_name!r} not one of {[m.value for m in Mode]}"
-        ) from None
-    core = CoreConfig(
+def core_config_from(root: Table, mode: Mode, k: int, evict_straddling: bool = True) -> CoreConfig:
+    """``[estimator]``, ``[allocator]``, ``[excitation]``: the core's tunables (every key of
+    EstimatorConfig, AllocatorConfig, ExcitationConfig; the backend among those installed;
+    ``measurement_std`` one value per dynamic state, k of them, or for a vessel 2 k: the
+    pose's and the velocities', and the filter tracks the pose too)."""
+    root.renamed("allocation", "allocator")
+    est_t = root.table("estimator")
+    estimator = est_t.dataclass(EstimatorConfig, defaults={"evict_straddling": evict_straddling})
+    std = estimator.measurement_std
+    sizes = (k, 2 * k) if k == 3 else (k,)
+    if std is not None and (len(std) not in sizes or min(std) < 0.0):
+        want = " or ".join(str(n) for n in sizes)
+        raise est_t.error("measurement_std", f"expected {want} numbers >= 0, got {list(std)}")
+    ws = estimator.wave_force_std
+    if ws is not None and (len(ws) != k or min(ws) <= 0.0):
+        raise est_t.error("wave_force_std", f"expected {k} numbers > 0, got {list(ws)}")
+    return CoreConfig(
         mode=mode,
-        estimator=dataclass_from_table(
-            EstimatorConfig,
-            # a discrete-time plant has no sample straddling an onset (faults act per step)
-            {"evict_straddling": not isinstance(plant, LinearPlant), **data.get("estimator", {})},
-            f"{where}.estimator",
+        estimator=estimator,
+        allocator=root.table("allocator").dataclass(
+            AllocatorConfig, choices={"backend": available_backends()}
         ),
-        allocator=dataclass_from_table(
-            AllocatorConfig, data.get("allocator", {}), f"{where}.allocator"
-        ),
-        excitation=dataclass_from_table(
-            ExcitationConfig, data.get("excitation", {}), f"{where}.excitation"
-        ),
+        excitation=root.table("excitation").dataclass(ExcitationConfig),
     )
-    noise = data.get("noise", {}).get("state_std")
-    integrator = head.get("integrator", "euler")
-    if integrator not in ("euler", "rk4"):
-        raise ConfigError(
-            f"{where}.scenario.integrator: expected 'euler' or 'rk4', got {integrator!r}"
-        )
-    x0 = vector(head.get("x0", [0.0] * x_len), f"{where}.scenario.x0", x_len)
-    dt = number(head, "dt", f"{where}.scenario", 1.0 if unit == "step" else math.nan)
-    if not dt > 0:
-        raise ConfigError(f"{where}.scenario.dt: must be > 0, got {dt}")
-    sc = Scenario(
-        name=str(head.get("name", where)),
-        description=str(head.get("description", "")),
+
+
+def _controller(t: Table, plant: Any) -> StateFeedback | PoseController:
+    if isinstance(plant, LinearPlant):
+        return StateFeedback(gain=t.number("K", -0.6), a=plant.a, b_v=plant.b_v)
+    return PoseController(kp=t.number("kp", 0.75), k_eta=t.number("k_eta", 0.63))
+
+
+def scenario_from(root: Table, mission: Table | None = None) -> Scenario:
+    """A scenario from the top level of its file. ``mission``: the top level of a mission
+    file whose ``[controller]``, ``[[reference]]``, ``[[fault]]`` replace the scenario's."""
+    own = {k: mission if mission is not None and mission.has(k) else root for k in REPLACEABLE}
+    root.allow(*REPLACEABLE)
+    head = root.table("scenario", required=True)
+    plant, ths, B = plant_from(root)
+    linear = isinstance(plant, LinearPlant)
+    ref_len, x_len, unit = (1, 1, "step") if linear else (3, 6, "s")
+    if B.shape[0] != ref_len:
+        raise root.error(None, f"B has {B.shape[0]} rows but the plant has {ref_len} inputs")
+    reference = tuple(
+        Segment(r.number("from"), r.vector("value", ref_len))
+        for r in own["reference"].tables("reference", required=True)
+    )
+    mode = head.enum("mode", Mode, Mode.FTCAP)
+    # a discrete-time plant has no sample straddling an onset (faults act per step)
+    core = core_config_from(root, mode, ref_len, evict_straddling=not linear)
+    noise = root.table("noise").vector("state_std", x_len, [0.0] * x_len, lo=0.0)
+    return Scenario(
+        name=head.string("name", root.file),
+        description=head.string("description", ""),
         plant=plant,
         thrusters=ths,
         B=B,
-        dt_s=dt,
-        duration_s=number(head, "duration", f"{where}.scenario"),
-        x0=x0,
-        controller=controller,
+        dt_s=head.number("dt", 1.0, positive=True) if linear else head.number("dt", positive=True),
+        duration_s=head.number("duration", positive=True),
+        x0=head.vector("x0", x_len, [0.0] * x_len),
+        controller=_controller(own["controller"].table("controller"), plant),
         reference=reference,
-        faults=_faults(data.get("fault", []), ths.m, where),
+        faults=fault_schedule_from(own["fault"].tables("fault"), ths.m),
         core=core,
-        integrator=integrator,
-        rk4_substeps=int(head.get("rk4_substeps", 8)),
-        noise_std=np.zeros(x_len)
-        if noise is None
-        else vector(noise, f"{where}.noise.state_std", x_len),
-        seed=int(head.get("seed", 0)),
+        integrator=head.choice("integrator", INTEGRATORS, "euler"),
+        rk4_substeps=head.integer("rk4_substeps", 8, lo=1),
+        noise_std=noise,
+        seed=head.integer("seed", 0, lo=0),
         time_unit=unit,
     )
-    if k != ref_len:
-        raise ConfigError(f"{where}: B has {k} rows but the plant has {ref_len} virtual inputs")
-    return sc
 
 
-SHIPPED = "ftcap_hil.data.scenarios"
+def parse_scenario(data: Mapping[str, Any], file: str = "scenario") -> Scenario:
+    """A scenario from a parsed TOML document (``file`` names it in messages); one whose
+    ``[plant] kind = "preset"`` is a realistic scenario (``config/realistic.py``)."""
+    if is_realistic(dict(data)):
+        return parse_realistic(dict(data), file)
+    with Table(data, file) as root:
+        return scenario_from(root)
 
 
 def shipped_scenarios() -> list[str]:

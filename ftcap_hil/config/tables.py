@@ -21,13 +21,10 @@ unknown key the nearest valid key (difflib) and the valid keys::
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import enum
 import math
-import types
-import typing
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, Self, TypeVar, overload
 
 import numpy as np
@@ -133,8 +130,21 @@ class Table:
         if key in self.data:
             return self.data[key]
         if default is MISSING:
-            raise self.error(key, "missing")
+            raise self.error(key, f"missing{self._typo_of(key)}")
         return default
+
+    def _typo_of(self, key: str) -> str:
+        """`` ('kye' is given: a typo?)`` for a given, unread key very close to ``key``."""
+        unread = [k for k in self.data if k not in self._known]
+        close = difflib.get_close_matches(key, unread, n=1, cutoff=0.8)
+        return f" ({close[0]!r} is given: a typo?)" if close else ""
+
+    def _missing_table(self, key: str, array: bool) -> ConfigError:
+        self._known.add(key)
+        name = f"{self.name}.{key}" if self.name else key
+        table = f"[[{name}]]" if array else f"[{name}]"
+        within = f" in {self.label}" if self.index is not None else ""
+        return ConfigError(f"{self.file}: {table} missing{within}{self._typo_of(key)}")
 
     def renamed(self, old: str, new: str) -> None:
         """Refuse ``old``, a key (or, at the top of a file, a table) now called ``new``."""
@@ -226,8 +236,8 @@ class Table:
     def string(self, key: str, default: str | None | _Missing = MISSING) -> str | None:
         """A non-empty string; ``default`` if absent."""
         v = self.value(key, default)
-        if v is None and key not in self.data:
-            return None
+        if key not in self.data:
+            return v
         if not isinstance(v, str) or not v:
             raise self._bad(key, "a non-empty string", v)
         return v
@@ -305,20 +315,28 @@ class Table:
     # ----------------------------------------------------------------- nested tables
 
     def _child(self, key: str, data: Mapping[str, Any], index: int | None = None) -> Table:
-        child = Table(data, self.file, f"{self.name}.{key}" if self.name else key, index)
+        name = f"{self.name}.{key}" if self.name else key
+        for child in self._children:  # read twice: the same reader, the same read keys
+            if child.name == name and child.index == index and child.data is data:
+                return child
+        child = Table(data, self.file, name, index)
         self._children.append(child)
         return child
 
     def table(self, key: str, required: bool = False) -> Table:
         """The sub-table ``[key]`` (an empty one if absent and not required)."""
-        v = self.value(key, MISSING if required else {})
+        if required and key not in self.data:
+            raise self._missing_table(key, array=False)
+        v = self.value(key, {})
         if not isinstance(v, dict):
             raise self._bad(key, "a table", v)
         return self._child(key, v)
 
     def tables(self, key: str, required: bool = False) -> list[Table]:
         """The array of tables ``[[key]]`` (empty if absent and not required)."""
-        v = self.value(key, MISSING if required else [])
+        if required and key not in self.data:
+            raise self._missing_table(key, array=True)
+        v = self.value(key, [])
         if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
             raise self._bad(key, f"an array of tables [[{key}]]", v)
         if required and not v:
@@ -333,40 +351,11 @@ class Table:
         exclude: Iterable[str] = (),
         defaults: Mapping[str, Any] | None = None,
     ) -> D:
-        """``cls`` built from this table: one key per dataclass field (minus ``exclude``),
-        each read by the getter its annotation calls for (float, int, bool, str, an Enum,
-        ``float | None``); ``choices`` restrict string fields; ``defaults`` replace the
-        dataclass's own defaults. A ValueError of ``cls`` becomes a ConfigError here."""
-        hints = typing.get_type_hints(cls)
-        skip = set(exclude)
-        given: dict[str, Any] = dict(defaults or {})
-        for f in dataclasses.fields(cls):  # type: ignore[arg-type]
-            if f.name in skip or not f.init:
-                continue
-            self._known.add(f.name)
-            if f.name in self.data:
-                given[f.name] = self._typed(f.name, hints[f.name], (choices or {}).get(f.name))
-        try:
-            return cls(**given)
-        except (TypeError, ValueError) as e:
-            raise self.error(None, str(e)) from e
+        """``cls`` built from this table, a key per field read by its annotation's type
+        (:func:`ftcap_hil.config.table_dataclass.read_dataclass`)."""
+        from ftcap_hil.config.table_dataclass import read_dataclass
 
-    def _typed(self, key: str, hint: Any, choices: Sequence[str] | None) -> Any:
-        if types.NoneType in typing.get_args(hint):  # ``X | None``: read as X
-            hint = next(a for a in typing.get_args(hint) if a is not types.NoneType)
-        if choices is not None:
-            return self.choice(key, choices)
-        if isinstance(hint, type) and issubclass(hint, enum.Enum):
-            return self.enum(key, hint)
-        getter: dict[Any, Callable[[str], Any]] = {
-            float: self.number,
-            int: self.integer,
-            bool: self.boolean,
-            str: self.string,
-        }
-        if hint not in getter:
-            raise TypeError(f"Table.dataclass: no getter for {key}: {hint}")
-        return getter[hint](key)
+        return read_dataclass(self, cls, choices or {}, set(exclude), defaults or {})
 
     # ----------------------------------------------------------------- the end
 
@@ -398,43 +387,3 @@ class Table:
     def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
         if exc_type is None:
             self.finish()
-
-
-# ------------------------------------------------------- the loaders' former helpers
-# Kept until every loader reads through Table (then removed).
-
-
-def get(table: dict[str, Any], key: str, where: str, default: Any = ...) -> Any:
-    if key in table:
-        return table[key]
-    if default is ...:
-        raise ConfigError(f"{where}.{key}: missing")
-    return default
-
-
-def number(table: dict[str, Any], key: str, where: str, default: Any = ...) -> float:
-    v = get(table, key, where, default)
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise ConfigError(f"{where}.{key}: expected a finite number, got {v!r}")
-    return float(v)
-
-
-def vector(v: Any, where: str, length: int | None = None) -> FloatArray:
-    try:
-        arr = np.atleast_1d(np.asarray(v, dtype=np.float64))
-    except (TypeError, ValueError):
-        raise ConfigError(f"{where}: expected numbers, got {v!r}") from None
-    if arr.ndim != 1 or (length is not None and arr.size != length) or not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{where}: expected {length or 'some'} finite numbers, got {v!r}")
-    return arr
-
-
-def dataclass_from_table(cls: type, table: dict[str, Any], where: str, **extra: Any) -> Any:
-    known = {f.name for f in dataclasses.fields(cls)}
-    unknown = set(table) - known
-    if unknown:
-        raise ConfigError(f"{where}: unknown keys {sorted(unknown)} (known: {sorted(known)})")
-    try:
-        return cls(**{**table, **extra})
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"{where}: {e}") from e

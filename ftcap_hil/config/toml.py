@@ -57,7 +57,7 @@ def read_toml(
         shipped_names(package)
     ):
         text = resources.files(package).joinpath(f"{name}.toml").read_bytes()
-        doc = TomlFile(parse_toml(text, name), name)
+        doc = TomlFile(parse_toml(text, f"{name}.toml"), f"{name}.toml")
     else:
         known = f" or shipped {what} {shipped_names(package)}" if package is not None else ""
         raise ConfigError(f"{what} {str(name_or_path)!r}: no such file{known}")

@@ -1,154 +1,138 @@
 """Vessel and plant tables: thruster geometry and limits, and the plant model's parameters.
 
 ``[vessel]``: ``preset = "paper-4.2"`` (with optional ``l``, ``u_limit``, ``step_limit`` or
-``rate_limit``) or a list of ``[[vessel.thruster]]``; ``[plant]``: ``kind = "linear"`` or
-``"vessel"`` with the model's parameters (docs/scenarios.md).
+``rate_limit``) or a list of ``[[vessel.thruster]]``; ``[plant]``: ``kind = "linear"`` (with
+``[actuators]``) or ``"vessel"`` with the model's parameters (docs/scenarios.md). Read with
+:class:`~ftcap_hil.config.tables.Table`: an unknown key is an error.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ftcap_hil.config.tables import dataclass_from_table, get, number, vector
+from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.geometry import Thruster, ThrusterSet, effectiveness, paper_four_thrusters
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
 
-
-def _number(table: dict[str, Any], key: str, where: str) -> float:
-    if key not in table:
-        raise ConfigError(f"{where}.{key}: missing")
-    value = table[key]
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ConfigError(f"{where}.{key}: expected a finite number, got {value!r}")
-    return float(value)
+PRESETS = ("paper-4.2",)
+PLANT_KINDS = ("linear", "vessel", "preset")
+INVERSIONS = ("euler", "trapezoid")
 
 
-def _optional(table: dict[str, Any], key: str, where: str) -> float | None:
-    return _number(table, key, where) if key in table else None
+def _angle_rad(t: Table) -> float:
+    if t.has("direction"):
+        if t.has("angle_deg"):
+            raise t.error(None, "give angle_deg or direction = [dx, dy], not both")
+        dx, dy = t.vector("direction", 2)
+        if math.hypot(dx, dy) == 0.0:
+            raise t.error("direction", "zero vector")
+        t.allow("angle_deg")
+        return math.atan2(dy, dx)
+    t.allow("direction")
+    return math.radians(t.number("angle_deg"))
 
 
-def thruster_from_table(table: dict[str, Any], where: str) -> Thruster:
-    """One ``[[thruster]]`` entry: name, x, y, angle_deg (or direction = [dx, dy]),
-    u_min, u_max, and optionally rate_max (N/s) or step_max (N per cycle)."""
-    name = str(table.get("name", where))
-    if "direction" in table:
-        d = table["direction"]
-        if not (isinstance(d, Sequence) and len(d) == 2):
-            raise ConfigError(f"{where}.direction: expected [dx, dy], got {d!r}")
-        angle = math.atan2(float(d[1]), float(d[0]))
-        if math.hypot(float(d[0]), float(d[1])) == 0.0:
-            raise ConfigError(f"{where}.direction: zero vector")
-    else:
-        angle = math.radians(_number(table, "angle_deg", where))
+def thruster_from(t: Table) -> Thruster:
+    """One ``[[vessel.thruster]]`` entry: name, x, y (m), angle_deg (or direction = [dx, dy]),
+    u_min, u_max (N), and optionally rate_max (N/s) or step_max (N per cycle)."""
+    name = t.string("name", f"T{(t.index or 0) + 1}")
+    angle = _angle_rad(t)
     thruster = Thruster(
         name=name,
-        x_m=_number(table, "x", where),
-        y_m=_number(table, "y", where),
+        x_m=t.number("x"),
+        y_m=t.number("y"),
         angle_rad=angle,
-        u_min=_number(table, "u_min", where),
-        u_max=_number(table, "u_max", where),
-        rate_max=_optional(table, "rate_max", where),
-        step_max=_optional(table, "step_max", where),
+        u_min=t.number("u_min"),
+        u_max=t.number("u_max"),
+        rate_max=t.number("rate_max", None, positive=True),
+        step_max=t.number("step_max", None, positive=True),
     )
     if not thruster.u_min <= 0.0 <= thruster.u_max or thruster.u_min == thruster.u_max:
-        raise ConfigError(
-            f"{where}: need u_min <= 0 <= u_max, got {thruster.u_min}, {thruster.u_max}"
-        )
+        raise t.error(None, f"need u_min <= 0 <= u_max, got {thruster.u_min}, {thruster.u_max}")
     if thruster.rate_max is not None and thruster.step_max is not None:
-        raise ConfigError(f"{where}: give rate_max or step_max, not both")
-    for key in ("rate_max", "step_max"):
-        value = getattr(thruster, key)
-        if value is not None and value <= 0.0:
-            raise ConfigError(f"{where}.{key}: must be > 0, got {value}")
+        raise t.error(None, "give rate_max or step_max, not both")
     return thruster
 
 
-def thrusters_from_table(table: dict[str, Any], where: str = "vessel") -> ThrusterSet:
-    """A vessel table: either ``preset = "paper-4.2"`` (with optional l, u_limit, and
-    step_limit (N per allocator cycle, the paper's form) or rate_limit (N/s))
-    or a list ``thruster = [{...}, ...]`` (TOML ``[[vessel.thruster]]``)."""
-    preset = table.get("preset")
-    if preset is not None:
-        if preset != "paper-4.2":
-            raise ConfigError(f"{where}.preset: unknown preset {preset!r} (known: 'paper-4.2')")
-        unknown = set(table) - {"preset", "l", "u_limit", "step_limit", "rate_limit"}
-        if unknown:
-            raise ConfigError(f"{where}: unknown keys {sorted(unknown)} for the paper-4.2 preset")
-        values = {"l": 0.3, "u_limit": 0.1, "step_limit": 0.09}
-        for key in ("l", "u_limit", "step_limit", "rate_limit"):
-            if key in table:
-                values[key] = _number(table, key, where)
-                if values[key] <= 0.0:
-                    raise ConfigError(f"{where}.{key}: must be > 0, got {values[key]}")
-        return paper_four_thrusters(
-            l_m=values["l"],
-            u_limit=values["u_limit"],
-            step_limit=values["step_limit"],
-            rate_limit=values.get("rate_limit"),
-        )
-    entries = table.get("thruster")
-    if not isinstance(entries, list) or not entries:
-        raise ConfigError(f"{where}.thruster: expected a non-empty list of thrusters")
-    thrusters = tuple(
-        thruster_from_table(t, f"{where}.thruster[{i}]") for i, t in enumerate(entries)
+def _preset(t: Table) -> ThrusterSet:
+    t.choice("preset", PRESETS)
+    step = t.number("step_limit", None, positive=True)
+    rate = t.number("rate_limit", None, positive=True)
+    if step is not None and rate is not None:
+        raise t.error(None, "give step_limit (N per cycle) or rate_limit (N/s), not both")
+    return paper_four_thrusters(
+        l_m=t.number("l", 0.3, positive=True),
+        u_limit=t.number("u_limit", 0.1, positive=True),
+        step_limit=0.09 if step is None else step,
+        rate_limit=rate,
     )
-    names = [t.name for t in thrusters]
+
+
+def thrusters_from(t: Table) -> ThrusterSet:
+    """A vessel table: either ``preset = "paper-4.2"`` (with optional l, u_limit, and
+    step_limit (N per allocator cycle, the paper's form) or rate_limit (N/s)) or a list
+    ``[[vessel.thruster]]`` (:func:`thruster_from`)."""
+    if t.has("preset"):
+        return _preset(t)
+    thrusters = tuple(thruster_from(e) for e in t.tables("thruster", required=True))
+    names = [th.name for th in thrusters]
     if len(set(names)) != len(names):
-        raise ConfigError(f"{where}.thruster: duplicate names in {names}")
+        raise t.error("thruster", f"duplicate names in {names}")
     return ThrusterSet(thrusters)
 
 
+def thrusters_from_table(table: Mapping[str, Any], file: str = "vessel file") -> ThrusterSet:
+    """:func:`thrusters_from` on a plain ``[vessel]`` mapping (unknown keys refused)."""
+    with Table(table, file, "vessel") as t:
+        return thrusters_from(t)
+
+
 def load_vessel(path: str | Path) -> ThrusterSet:
-    """Read a vessel TOML file (top-level table as in ``thrusters_from_table``)."""
+    """A vessel TOML file: a ``[vessel]`` table, or the vessel keys at the top level."""
     doc = read_toml(path, what="vessel file")
-    return thrusters_from_table(doc.data.get("vessel", doc.data), where=doc.source)
+    with Table.document(doc) as root:
+        return thrusters_from(root.table("vessel") if root.has("vessel") else root)
 
 
-def plant_from_tables(
-    data: dict[str, Any], where: str
-) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, FloatArray]:
-    plant_t = get(data, "plant", where)
-    kind = get(plant_t, "kind", f"{where}.plant")
+def _linear(root: Table, plant_t: Table) -> tuple[LinearPlant, ThrusterSet, FloatArray]:
+    b_u = plant_t.vector("b_u")
+    act = root.table("actuators", required=True)
+    lo, hi = act.number("u_min"), act.number("u_max")
+    if not lo <= 0.0 <= hi or lo == hi:
+        raise act.error(None, f"need u_min <= 0 <= u_max, got {lo}, {hi}")
+    step = act.number("step_max", None, positive=True)
+    ths = ThrusterSet(
+        tuple(Thruster(f"U{i + 1}", 0.0, 0.0, 0.0, lo, hi, step_max=step) for i in range(b_u.size))
+    )
+    plant = LinearPlant(a=plant_t.number("a", 1.2), b_v=plant_t.number("b_v", 1.0))
+    return plant, ths, b_u[None, :]
+
+
+def plant_from(root: Table) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, FloatArray]:
+    """``[plant]`` (+ ``[actuators]`` for the linear plant, ``[vessel]`` for the vessel) of a
+    file: the plant model, its thrusters and B (k x m)."""
+    plant_t = root.table("plant", required=True)
+    kind = plant_t.choice("kind", PLANT_KINDS)
+    if kind == "preset":  # dispatched before this reader: a scenario file's realistic form
+        raise plant_t.error("kind", "'preset' (a vessel preset) is for scenario files only")
     if kind == "linear":
-        a = number(plant_t, "a", f"{where}.plant", 1.2)
-        b_v = number(plant_t, "b_v", f"{where}.plant", 1.0)
-        b_u = vector(get(plant_t, "b_u", f"{where}.plant"), f"{where}.plant.b_u")
-        act = get(data, "actuators", where)
-        lo, hi = (
-            number(act, "u_min", f"{where}.actuators"),
-            number(act, "u_max", f"{where}.actuators"),
-        )
-        step = number(act, "step_max", f"{where}.actuators", math.inf)
-        ths = ThrusterSet(
-            tuple(
-                Thruster(
-                    f"U{i + 1}",
-                    0.0,
-                    0.0,
-                    0.0,
-                    lo,
-                    hi,
-                    step_max=step if math.isfinite(step) else None,
-                )
-                for i in range(b_u.size)
-            )
-        )
-        return LinearPlant(a=a, b_v=b_v), ths, b_u[None, :]
-    if kind == "vessel":
-        params: dict[str, Any] = {
-            k: number(plant_t, k, f"{where}.plant")
-            for k in plant_t
-            if k not in ("kind", "inversion")
-        }
-        if "inversion" in plant_t:
-            params["inversion"] = plant_t["inversion"]
-        vessel = dataclass_from_table(SurfaceVessel, params, f"{where}.plant")
-        ths = thrusters_from_table(get(data, "vessel", where), f"{where}.vessel")
-        return vessel, ths, effectiveness(ths)
-    raise ConfigError(f"{where}.plant.kind: expected 'linear' or 'vessel', got {kind!r}")
+        return _linear(root, plant_t)
+    vessel = plant_t.dataclass(
+        SurfaceVessel, exclude=("k", "state_labels"), choices={"inversion": INVERSIONS}
+    )
+    ths = thrusters_from(root.table("vessel", required=True))
+    return vessel, ths, effectiveness(ths)
+
+
+def surface_vessel_from(root: Table, what: str) -> tuple[SurfaceVessel, ThrusterSet, FloatArray]:
+    """:func:`plant_from` for a process that drives a vessel (``what``: "the daemon")."""
+    plant, ths, B = plant_from(root)
+    if not isinstance(plant, SurfaceVessel):
+        raise ConfigError(f"{root.file}: [plant] kind: {what} drives a vessel, got 'linear'")
+    return plant, ths, B

@@ -103,6 +103,10 @@ class Allocator:
         u_range = np.maximum(np.abs(self._u_min), np.abs(self._u_max))
         self._scale = np.asarray(scale, dtype=np.float64)
         self._u_range = u_range
+        # The QP is solved in commands scaled to each thruster's range (u = D x): in newtons
+        # a full-scale vessel's H spans 1e-11 (effort) to 1e-6 (slack), below the solvers'
+        # zero tolerances, and both backends returned 40 % of the optimum (or no answer).
+        self._D = np.maximum(u_range, 1e-300)
         self._solver = make_solver(self.config.backend, self._B.shape[1])
         self._small_demand = _MAX_DEMAND * float(self._scale.min())  # below: never shrunk
         self._h_key: FloatArray | None = None  # delta_hat that _beff and _H were built for
@@ -126,14 +130,15 @@ class Allocator:
         return self._solver.name
 
     def _effective(self, delta_hat: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """B Delta_hat and the QP's H for it, rebuilt only when delta_hat moved by more than
-        _DELTA_STILL since the last build: the same H array handed back lets the proxsuite
-        workspace skip its set-up (docs/decisions.md)."""
+        """B Delta_hat and the QP's H for it in the scaled commands x = u / range, rebuilt
+        only when delta_hat moved by more than _DELTA_STILL since the last build: the same H
+        array handed back lets the proxsuite workspace skip its set-up (docs/decisions.md)."""
         key = self._h_key
         if key is None or np.abs(delta_hat - key).max() > _DELTA_STILL:
             beff = self._B * delta_hat
-            H = beff.T @ (self._qs[:, None] * beff)
-            H.flat[:: H.shape[0] + 1] += self._ru
+            scaled = beff * self._D
+            H = scaled.T @ (self._qs[:, None] * scaled)
+            H.flat[:: H.shape[0] + 1] += self._ru * self._D**2
             self._h_key, self._beff, self._H = delta_hat.copy(), beff, H
         return self._beff, self._H
 
@@ -198,9 +203,10 @@ class Allocator:
                 target = unit * (_MAX_DEMAND / reach)
         g = beff.T @ (self._qs * target)
         g = -g if u_pref is None else -g - self._ru * u_pref
-        sol = self._solver.solve(H, g, lo, hi)
+        D = self._D
+        sol = self._solver.solve(H, g * D, lo / D, hi / D)
         if sol.found:
-            u = sol.x
+            u = sol.x * D
         else:
             u = np.clip(np.linalg.pinv(beff) @ target, lo, hi)
             u = np.where(np.isfinite(u), u, np.clip(0.0, lo, hi))

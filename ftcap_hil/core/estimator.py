@@ -67,6 +67,13 @@ class EstimatorConfig:
     measurement_std: tuple[float, ...] | None = None
     model_error: float = 0.002  # process noise on s: this fraction of S, through G
     adapt_s: float = 10.0  # time constant of the process-noise scale learnt online (0: off)
+    # The sea's first-order wave load as oscillator states (core/wave_model.py): its peak
+    # period (s; 0: no wave states), damping, and standard deviation per axis (N, N, N m;
+    # None: wave_force_rel of the largest achievable wrench S).
+    wave_period_s: float = 0.0
+    wave_damping: float = 0.1
+    wave_force_std: tuple[float, ...] | None = None
+    wave_force_rel: float = 0.3
     # Which part of the estimated bias b the allocator compensates: "attributed" (only what
     # core/decisions.py attributes to a thruster; the environment is the controller's) or
     # "all" (the paper's model: every bias is a thruster's).

@@ -42,6 +42,7 @@ from ftcap_hil.core.estimator import Estimate, EstimatorConfig
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.step_models import LinearStep, StepModel, VesselStep, inv_small, step_model
 from ftcap_hil.core.vessel3dof import PlantModel
+from ftcap_hil.core.wave_model import WaveModel
 
 # Re-exported: callers import the step models from here too.
 __all__ = [
@@ -81,13 +82,18 @@ class KalmanEstimator:
         self._B = np.array(B, dtype=np.float64)
         self._k, self._m = self._B.shape
         self._scale = np.asarray(scale, dtype=np.float64)
-        self._model = step_model(plant)
+        std = self._measurement_std()
+        self._model = step_model(plant, with_pose=std.size == 2 * self._k)
         if self._model.k != self._k:
             raise ValueError(f"plant has {self._model.k} dynamic states, B has {self._k} rows")
         self._pinv = np.linalg.pinv(self._B)
         k, m = self._k, self._m
-        self._n = 2 * k + m
-        self._R = np.diag(np.square(self._measurement_std()))
+        ks = self._ks = self._model.ns  # the tracked state: nu, or [eta, nu] with the pose
+        self._waves = self._wave_model()
+        self._nw = 2 * k if self._waves is not None else 0
+        self._theta_end = ks + m + k  # z = [s, delta, b, wave states]
+        self._n = self._theta_end + self._nw
+        self._R = np.diag(np.square(std))
         self._theta0_var = np.concatenate(
             [np.full(m, cfg.initial_delta_std**2), np.square(cfg.initial_bias_rel * self._scale)]
         )
@@ -99,11 +105,12 @@ class KalmanEstimator:
         self._q_theta = np.concatenate(
             [np.full(m, cfg.q_delta**2), np.square(cfg.q_bias_rel * self._scale)]
         )
-        self._theta_diag = (np.arange(k, self._n), np.arange(k, self._n))
+        self._theta_diag = (np.arange(ks, self._theta_end), np.arange(ks, self._theta_end))
         self._IKH = np.eye(self._n)
-        self._s_diag = (np.arange(k), np.arange(k))
-        self.z: FloatArray = np.concatenate([np.zeros(k), np.ones(m), np.zeros(k)])
-        self.P: FloatArray = np.diag(np.concatenate([np.ones(k), self._theta0_var]))
+        self._s_diag = (np.arange(ks), np.arange(ks))
+        self.z: FloatArray = np.zeros(self._n)
+        self.P: FloatArray = np.zeros((self._n, self._n))
+        self.reset()
         self._started = False
         self._cusum = 0.0
         self._since_alarm = 10**9
@@ -116,22 +123,42 @@ class KalmanEstimator:
         self.suspect_weight: FloatArray = np.zeros(self._m)  # their posterior odds, sum 1
         self.q_scale = 1.0  # process-noise scale learnt from the innovations
 
+    def _wave_model(self) -> WaveModel | None:
+        cfg = self.config
+        if cfg.wave_period_s <= 0.0:
+            return None
+        std = cfg.wave_force_std
+        if std is None:
+            sigma = cfg.wave_force_rel * self._scale
+        else:
+            sigma = np.asarray(std, dtype=np.float64)
+            if sigma.shape != (self._k,):
+                raise ValueError(f"estimator.wave_force_std: expected {self._k} values, got {std}")
+        return WaveModel(2.0 * math.pi / cfg.wave_period_s, cfg.wave_damping, sigma)
+
     def _measurement_std(self) -> FloatArray:
         std = self.config.measurement_std
         if std is None:
             return np.full(self._k, 1e-6)
         arr = np.asarray(std, dtype=np.float64)
-        if arr.shape != (self._k,):
-            raise ValueError(f"estimator.measurement_std: expected {self._k} values, got {std}")
+        pose = 2 * self._k if self._k == 3 else self._k
+        if arr.shape not in ((self._k,), (pose,)):
+            raise ValueError(
+                f"estimator.measurement_std: expected {self._k} values (the velocities) or "
+                f"{pose} (pose and velocities), got {std}"
+            )
         return np.maximum(arr, 1e-9)
 
     def reset(self, delta: FloatArray | None = None, bf: FloatArray | None = None) -> None:
         """Back to the initial state (optionally with given parameters)."""
-        k, m = self._k, self._m
-        self.z = np.concatenate(
-            [np.zeros(k), np.ones(m) if delta is None else delta, np.zeros(k) if bf is None else bf]
-        )
-        self.P = np.diag(np.concatenate([np.ones(k), self._theta0_var]))
+        ks, m, e = self._ks, self._m, self._theta_end
+        self.z = np.zeros(self._n)
+        self.z[ks : ks + m] = 1.0 if delta is None else delta
+        self.z[ks + m : e] = 0.0 if bf is None else bf
+        self.P = np.zeros((self._n, self._n))
+        self.P[:e, :e] = np.diag(np.concatenate([np.ones(ks), self._theta0_var]))
+        if self._waves is not None:
+            self.P[e:, e:] = self._waves.stationary_cov()
         self._started = False
         self._cusum = 0.0
 
@@ -141,29 +168,29 @@ class KalmanEstimator:
         """One sample: the mean command u (m,) over the last ``dt_s`` and the measured plant
         state at its end (the plant's full state vector, e.g. [eta, nu]); ``x_prev``, the
         state at its start, is used only by the first sample (it fixes s)."""
-        k, m = self._k, self._m
+        ks, m = self._ks, self._m
         y = self._model.dynamic_state(x_now)
         if not self._started:
             self._started = True
-            self.P[:k, :k] = self._R
+            self.P[:ks, :ks] = self._R
             if x_prev is None:  # nothing to learn from one state
-                self.z[:k] = y
+                self.z[:ks] = y
                 return self._output(0.0, False, np.zeros(m))
-            self.z[:k] = self._model.dynamic_state(x_prev)
+            self.z[:ks] = self._model.dynamic_state(x_prev)
         z_post, P_post = self.z.copy(), self.P.copy()
         s_pred, F = self._predict(u, dt_s)
-        e = y - s_pred
-        S_inv = inv_small(self.P[:k, :k] + self._R)
+        e = self._model.innovation(y, s_pred)
+        S_inv = inv_small(self.P[:ks, :ks] + self._R)
         nis = float(e @ S_inv @ e)
-        h = F[:k, k : k + m].copy()  # how each delta_i moved this sample's prediction
+        h = F[:ks, ks : ks + m].copy()  # how each delta_i moved this sample's prediction
         info = np.einsum("ji,jl,li->i", h, S_inv, h)
         self.samples += 1
-        self._last_evidence = (e, h, F[:k, k + m :].copy(), S_inv)
+        self._last_evidence = (e, h, F[:ks, ks + m : self._theta_end].copy(), S_inv)
         self._evidence.append(self._last_evidence)
         alarm = self._change_detected(nis)
         if not alarm:
             self._adapt(nis, dt_s)
-            self._correct(self.P[:, :k] @ S_inv, e)
+            self._correct(self.P[:, :ks] @ S_inv, e)
             self._project()
             return self._output(nis, False, info)
         # A change: the parameters' old evidence is dropped (their covariance widened before
@@ -173,27 +200,27 @@ class KalmanEstimator:
         self.suspects = self._isolate()
         self.z, self.P = z_post, self._widened(P_post, self.suspects)
         s_pred, F = self._predict(u, dt_s)
-        K = self.P[:, :k] @ inv_small(self.P[:k, :k] + self._R)
+        K = self.P[:, :ks] @ inv_small(self.P[:ks, :ks] + self._R)
         fast = self.z + K @ e
-        K[k:] = 0.0
+        K[ks:] = 0.0
         self._correct(K, e)
         self._project()
         out = self._output(nis, True, info)
-        d = np.clip(fast[k : k + m], 0.0, 1.0)
-        fast_est = replace(out.estimate, delta_hat=d, bf_hat=fast[k + m :].copy(),
-                           f_hat=self._pinv @ fast[k + m :])  # fmt: skip
+        d = np.clip(fast[ks : ks + m], 0.0, 1.0)
+        bf_fast = fast[ks + m : self._theta_end].copy()
+        fast_est = replace(out.estimate, delta_hat=d, bf_hat=bf_fast, f_hat=self._pinv @ bf_fast)
         return replace(out, estimate=fast_est)
 
     def _correct(self, K: FloatArray, e: FloatArray) -> None:
         """Measurement update with gain K (n, k); Joseph form, which stays symmetric
         positive semi-definite when R << P_theta."""
-        k = self._k
+        ks = self._ks
         self.z = self.z + K @ e
         IKH = self._IKH
-        IKH[:, :k] = -K
+        IKH[:, :ks] = -K
         IKH[self._s_diag] += 1.0
         P = IKH @ self.P @ IKH.T + K @ self._R @ K.T
-        IKH[:, :k] = 0.0  # back to the identity (the diagonal of the first k columns too)
+        IKH[:, :ks] = 0.0  # back to the identity (the diagonal of the first k columns too)
         IKH[self._s_diag] = 1.0
         self.P = 0.5 * (P + P.T)
 
@@ -202,34 +229,43 @@ class KalmanEstimator:
         estimate projection): the parameters correlated with a clipped delta_i move with it,
         so the state stays consistent with the data. A plain clip here made the estimate
         drift along the unobservable directions while commands saturated."""
-        k, m = self._k, self._m
-        d = self.z[k : k + m]
+        ks, m = self._ks, self._m
+        d = self.z[ks : ks + m]
         low, high = d < 0.0, d > 1.0
         active = np.flatnonzero(low | high)
         if active.size == 0:
             return
-        rows = k + active
+        rows = ks + active
         target = np.where(low[active], 0.0, 1.0)
         PD = self.P[:, rows]  # P D^T
         gap = self.z[rows] - target
         self.z -= PD @ np.linalg.solve(self.P[np.ix_(rows, rows)], gap)
-        np.clip(self.z[k : k + m], 0.0, 1.0, out=self.z[k : k + m])  # rounding only
+        np.clip(self.z[ks : ks + m], 0.0, 1.0, out=self.z[ks : ks + m])  # rounding only
 
     def _predict(self, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
-        k, m = self._k, self._m
-        s, delta, b = self.z[:k], self.z[k : k + m], self.z[k + m :]
+        ks, m, e = self._ks, self._m, self._theta_end
+        s, delta, b = self.z[:ks], self.z[ks : ks + m], self.z[ks + m : e]
         w = self._B @ (delta * u) + b
+        wave = self._waves.step(dt) if self._waves is not None else None
+        if wave is not None:
+            w = w + wave.mean @ self.z[e:]
         s1, A, G = self._model.predict(s, w, dt)
-        F = self._F  # identity outside the first k rows, which are rewritten each step
-        F[:k, :k] = A
-        F[:k, k : k + m] = G @ (self._B * u)
-        F[:k, k + m :] = G
+        F = self._F  # identity outside the first ks rows (and the wave block): rewritten
+        F[:ks, :ks] = A
+        F[:ks, ks : ks + m] = G @ (self._B * u)
+        F[:ks, ks + m : e] = G
+        if wave is not None:
+            F[:ks, e:] = G @ wave.mean
+            F[e:, e:] = wave.phi
         P = F @ self.P @ F.T
         Gq = G * self._model_std
-        P[:k, :k] += self.q_scale * (Gq @ Gq.T)
+        P[:ks, :ks] += self.q_scale * (Gq @ Gq.T)
         P[self._theta_diag] += self._q_theta * dt
+        if wave is not None:
+            P[e:, e:] += wave.q
+            self.z[e:] = wave.phi @ self.z[e:]
         self.P = P
-        self.z[:k] = s1
+        self.z[:ks] = s1
         return s1, F
 
     def _adapt(self, nis: float, dt_s: float) -> None:
@@ -241,7 +277,7 @@ class KalmanEstimator:
         cfg = self.config
         if cfg.adapt_s <= 0.0:
             return
-        ratio = min(max(nis / self._k, 0.01), 100.0)
+        ratio = min(max(nis / self._ks, 0.01), 100.0)
         # 1/n at first (the scale settles within the first samples), then the time constant
         step = math.log(ratio) * min(1.0, max(dt_s / cfg.adapt_s, 1.0 / max(self.samples, 1)))
         self.q_scale = min(max(self.q_scale * math.exp(step), 1e-6), 1e6)
@@ -249,7 +285,7 @@ class KalmanEstimator:
     def _change_detected(self, nis: float) -> bool:
         """CUSUM on nis - k: alarm above ``cusum_threshold`` (then restart), with a hold-off
         of m + k samples after an alarm so one onset is one alarm."""
-        cfg, k = self.config, self._k
+        cfg, k = self.config, self._ks
         self._since_alarm += 1
         self._cusum = max(0.0, self._cusum + nis - k - cfg.cusum_drift)
         if self._cusum > cfg.cusum_threshold and self._since_alarm > self._m + k:
@@ -265,11 +301,13 @@ class KalmanEstimator:
         """Command amplitude (N, (m,)) that alone brings each delta_i ``info_rate`` units of
         Fisher information per second at this sensor noise: (|G B_i| a_i)^2 / s^2 per
         sample, s^2 the innovation variance of a converged filter (about 2 R)."""
-        x = np.concatenate([np.zeros(self._k)])
-        s0 = self.z[: self._k] if self._started else x
-        _s1, _A, G = self._model.predict(s0, np.zeros(self._k), dt_s)
-        gain = np.linalg.norm(G @ self._B, axis=0)  # |G B_i| per unit command
-        s2 = 2.0 * float(np.mean(np.diag(self._R)))
+        k, ks = self._k, self._ks
+        s0 = self.z[:ks] if self._started else np.zeros(ks)
+        _s1, _A, G = self._model.predict(s0, np.zeros(k), dt_s)
+        # the velocities' rows only (the last k of s): sized conservatively, without what
+        # a measured pose adds over longer horizons
+        gain = np.linalg.norm(G[ks - k :] @ self._B, axis=0)  # |G B_i| per unit command
+        s2 = 2.0 * float(np.mean(np.diag(self._R)[ks - k :]))
         out: FloatArray = np.sqrt(info_rate * dt_s * s2) / np.maximum(gain, 1e-300)
         return out
 
@@ -297,7 +335,7 @@ class KalmanEstimator:
         keep what the filter knows of them: one failure does not make them unknown."""
         k = self._k
         wide = np.concatenate([suspects, np.ones(k, dtype=bool)])
-        idx = k + np.flatnonzero(wide)
+        idx = self._ks + np.flatnonzero(wide)
         # each suspect widened in proportion to its posterior odds of being the one
         share = np.concatenate([self.suspect_weight, np.ones(k)])[wide]
         var = np.maximum(np.diag(P)[idx], share * self._reset_var[wide])
@@ -308,17 +346,18 @@ class KalmanEstimator:
         return out
 
     def _output(self, nis: float, alarm: bool, info: FloatArray) -> FilterOutput:
-        k, m = self._k, self._m
-        delta = self.z[k : k + m].copy()
-        bf = self.z[k + m :].copy()
-        var = np.diag(self.P)[k : k + m].copy()
+        ks, m = self._ks, self._m
+        delta = self.z[ks : ks + m].copy()
+        bf = self.z[ks + m : self._theta_end].copy()
+        var = np.diag(self.P)[ks : ks + m].copy()
         est = Estimate(
             delta,
             bf,
             self._pinv @ bf,
-            innovation=math.sqrt(nis / k) if nis > 0 else 0.0,
+            innovation=math.sqrt(nis / ks) if nis > 0 else 0.0,
             window_len=self.samples,
             restarted=alarm,
             delta_std=np.sqrt(np.maximum(var, 0.0)),
         )
-        return FilterOutput(est, var, self.P[k + m :, k + m :].copy(), nis, alarm, info)
+        bias = slice(ks + m, self._theta_end)
+        return FilterOutput(est, var, self.P[bias, bias].copy(), nis, alarm, info)

@@ -10,35 +10,26 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
-from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.messages import EscStatus
 from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
 from ftcap_hil.runtime.daemon import DaemonConfig, Ports
+from ftcap_hil.runtime.port_settings import PortSettings
 
 
 class AllocatorSettings(Protocol):
-    """What the wiring reads: the daemon's settings and the merged TOML's bridge tables
-    (``config.daemon.LoadedConfig`` is one)."""
+    """What the wiring reads: the daemon's settings and its ports' settings, validated by
+    ``config.bridges`` (``config.daemon.LoadedConfig`` is one)."""
 
     @property
     def daemon(self) -> DaemonConfig: ...
     @property
-    def raw(self) -> dict[str, Any]: ...
+    def ports(self) -> PortSettings: ...
     @property
     def source(self) -> str: ...
-
-
-def _section(cfg: AllocatorSettings, name: str) -> dict[str, Any]:
-    """A copy of the bridge table ``name`` ({} if absent)."""
-    table = cfg.raw.get(name, {})
-    if not isinstance(table, dict):
-        raise ConfigError(f"{cfg.source}.{name}: expected a table")
-    return dict(table)
 
 
 def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, Any]:
@@ -48,19 +39,14 @@ def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, 
     from bridges.can_io.bus import open_can_bus
     from bridges.can_io.force_map import ForceRawMap
 
-    c = _section(cfg, "can")
+    c = cfg.ports.can
     ths = cfg.daemon.thrusters
-    bus = stack.enter_context(
-        open_can_bus(str(c.get("interface", "canhub")), str(c.get("channel", "127.0.0.1:29536")))
-    )
-    fmap = ForceRawMap.from_limits(ths.u_min, ths.u_max, float(c.get("deadband_n", 0.0)))
-    sink = stack.enter_context(
-        CanThrusterSink(bus, fmap, node_id=int(c.get("node_id", 10)), zero_on_shutdown=True)
-    )
-    esc_ids = c.get("esc_node_ids")
+    bus = stack.enter_context(open_can_bus(c.interface, c.channel))
+    fmap = ForceRawMap.from_limits(ths.u_min, ths.u_max, c.deadband_n)
+    sink = stack.enter_context(CanThrusterSink(bus, fmap, node_id=c.node_id, zero_on_shutdown=True))
     esc = None
-    if c.get("esc_monitor", True):
-        esc = stack.enter_context(CanEscStatusSource(bus, ths.m, esc_node_ids=esc_ids))
+    if c.esc_monitor:
+        esc = stack.enter_context(CanEscStatusSource(bus, ths.m, esc_node_ids=c.esc_node_ids))
     return sink, esc
 
 
@@ -96,24 +82,18 @@ def build_ports(
 def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports) -> Any:
     """MAVLink setpoints, manual input, odometry and status onto ``ports`` (unless
     ``[mavlink] enabled = false``); the link's parameter server, or None."""
-    mav_cfg = _section(cfg, "mavlink")
-    if not mav_cfg.pop("enabled", True):
+    mav_cfg = cfg.ports.mavlink
+    if mav_cfg is None:
         return None
     from bridges.mavlink import allocator as mav
     from bridges.mavlink.allocator_params import allocator_param_specs
-    from bridges.mavlink.config import MavlinkEndpoint, default_allocator_endpoint
     from bridges.mavlink.status import MavlinkStatusSink
 
     d = cfg.daemon
-    max_wrench = tuple(mav_cfg.pop("max_wrench", (0.3, 0.3, 0.06)))
-    limit = mav_cfg.pop("wrench_limit", None)
-    endpoint = MavlinkEndpoint.from_mapping("mavlink", mav_cfg, default_allocator_endpoint())
     link = stack.enter_context(
         mav.MavlinkAllocatorLink(
-            mav.AllocatorLinkConfig(
-                cfg.daemon.thrusters.m, max_wrench, None if limit is None else tuple(limit)
-            ),
-            endpoint,
+            mav.AllocatorLinkConfig(d.thrusters.m, mav_cfg.max_wrench, mav_cfg.wrench_limit),
+            mav_cfg.endpoint,
             allocator_param_specs(
                 d.core,
                 d.setpoint_timeout_s,
@@ -133,21 +113,14 @@ def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Por
 def open_zenoh(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports) -> None:
     """The Zenoh router session's setpoints, odometry and status onto ``ports`` (unless
     ``[zenoh] enabled = false``)."""
-    z_cfg = _section(cfg, "zenoh")
-    if not z_cfg.pop("enabled", True):
+    z_cfg = cfg.ports.zenoh
+    if z_cfg is None:
         return
-    from bridges.zenoh_io import config as zenoh_config
     from bridges.zenoh_io import link as zenoh_link
     from bridges.zenoh_io.status import ZenohStatusSink
 
-    conf_name = str(z_cfg.get("config", "allocator.json5"))
-    path = Path(conf_name)
-    if not path.exists():
-        path = zenoh_config.shipped_config_path(conf_name.removesuffix(".json5"))
-    conf = zenoh_link.load_config(path, list(z_cfg.get("overrides", [])))
-    zl = stack.enter_context(
-        zenoh_link.ZenohAllocatorLink(str(z_cfg.get("vessel", "ftcap1")), conf)
-    )
+    conf = zenoh_link.load_config(z_cfg.config, list(z_cfg.overrides))
+    zl = stack.enter_context(zenoh_link.ZenohAllocatorLink(z_cfg.vessel, conf))
     ports.setpoints.append(zl.setpoints)
     ports.telemetry.append(zl.odometry)
     ports.status.append(ZenohStatusSink(zl))

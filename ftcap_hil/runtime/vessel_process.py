@@ -25,11 +25,9 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import json
 import logging
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
@@ -40,6 +38,12 @@ from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, Odomet
 from ftcap_hil.core.status import Severity
 from ftcap_hil.ports.mailbox import Stamped
 from ftcap_hil.runtime.loop import DeadlineLoop
+from ftcap_hil.runtime.port_settings import (
+    CanSettings,
+    MavlinkSettings,
+    PortSettings,
+    ZenohSettings,
+)
 from ftcap_hil.runtime.signals import capture_signals
 from ftcap_hil.runtime.transitions import TransitionLog, log_to
 from sim.vessel import (
@@ -67,10 +71,14 @@ class ShellSettings:
 
 @dataclass(frozen=True)
 class VesselConfig:
+    """The sim process's file: shell settings, the truth model, the merged TOML, the file's
+    name, and the ports ([can], [mavlink], [zenoh]) to open."""
+
     shell: ShellSettings
     sim: VesselSimConfig
-    raw: dict[str, Any]  # the merged TOML, for the bridge sections
+    raw: dict[str, Any]  # the merged TOML
     source: str
+    ports: PortSettings
 
 
 class Recorder:
@@ -102,43 +110,35 @@ class VesselPorts:
         self.zenoh: Any = None
 
     @classmethod
-    def open(cls, raw: dict[str, Any], ths: ThrusterSet, injection_enabled: bool) -> VesselPorts:
+    def open(cls, settings: PortSettings, ths: ThrusterSet, injection_enabled: bool) -> VesselPorts:
+        """Open every port of ``settings`` (validated by ``config.bridges``) or none."""
         ports = cls(injection_enabled)
         try:
-            ports._open_can(raw.get("can", {}), ths)
-            ports._open_mavlink(raw.get("mavlink", {}), ths.m)
-            ports._open_zenoh(raw.get("zenoh", {}), ths.m)
+            ports._open_can(settings.can, ths)
+            if settings.mavlink is not None:
+                ports._open_mavlink(settings.mavlink, ths.m)
+            if settings.zenoh is not None:
+                ports._open_zenoh(settings.zenoh, ths.m)
         except BaseException:
             ports.shutdown()
             raise
         return ports
 
-    def _open_can(self, c: dict[str, Any], ths: ThrusterSet) -> None:
+    def _open_can(self, c: CanSettings, ths: ThrusterSet) -> None:
         from bridges.can_io.adapters import CanCommandSource, CanEscStatusSink
         from bridges.can_io.bus import CanBusError, open_can_bus
         from bridges.can_io.force_map import ForceRawMap
         from bridges.can_io.hub import CanHub, parse_channel
 
-        keys = {"interface", "channel", "allocator_node_id", "esc_node_ids", "start_hub"}
-        if unknown := set(c) - keys - {"deadband_n"}:
-            raise ConfigError(f"can: unknown keys {sorted(unknown)}")
-        interface = str(c.get("interface", "canhub"))
-        channel = str(c.get("channel", "127.0.0.1:29536"))
-        ids = c.get("esc_node_ids", [20 + i for i in range(ths.m)])
-        if not isinstance(ids, list) or len(ids) != ths.m:
-            raise ConfigError(f"can.esc_node_ids: expected {ths.m} node IDs, got {ids!r}")
-        start_hub = c.get("start_hub", False)
-        if start_hub not in (True, False) or (start_hub and interface != "canhub"):
-            raise ConfigError(f"can.start_hub: true needs interface 'canhub', got {start_hub!r}")
+        ids = c.esc_node_ids if c.esc_node_ids is not None else [20 + i for i in range(ths.m)]
         try:
-            if start_hub:
-                host, port = parse_channel(channel)
+            if c.start_hub:
+                host, port = parse_channel(c.channel)
                 self._stack.callback(CanHub(host, port).start().shutdown)
-            bus = open_can_bus(interface, channel)
+            bus = open_can_bus(c.interface, c.channel)
             self._stack.callback(bus.shutdown)
-            force_map = ForceRawMap.from_limits(ths.u_min, ths.u_max, c.get("deadband_n", 0.0))
-            allocator = c.get("allocator_node_id", 10)
-            source = CanCommandSource(bus, force_map, allocator_node_id=allocator)
+            force_map = ForceRawMap.from_limits(ths.u_min, ths.u_max, c.deadband_n)
+            source = CanCommandSource(bus, force_map, allocator_node_id=c.node_id)
             self._stack.callback(source.shutdown)
             self.esc_sink = CanEscStatusSink(bus, ids)
             self._stack.callback(self.esc_sink.shutdown)
@@ -148,41 +148,23 @@ class VesselPorts:
             raise ConfigError(f"can: {e}") from e
         self.commands = source.commands
 
-    def _open_mavlink(self, c: dict[str, Any], m: int) -> None:
-        if not _enabled(c, "mavlink"):
-            return
-        from bridges.mavlink.config import LinkConfigError, MavlinkEndpoint, default_vessel_endpoint
+    def _open_mavlink(self, c: MavlinkSettings, m: int) -> None:
         from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
 
-        values = {k: v for k, v in c.items() if k != "enabled"}
         try:
-            endpoint = MavlinkEndpoint.from_mapping("mavlink", values, default_vessel_endpoint())
-            self.mavlink = MavlinkVesselLink(m, endpoint)
-        except LinkConfigError as e:
+            self.mavlink = MavlinkVesselLink(m, c.endpoint)
+        except ConfigError as e:  # the endpoint cannot be opened (port taken, bad device)
             raise PortError(f"mavlink: {e}") from e
         self._stack.callback(self.mavlink.shutdown)
         self.mavlink.params.set(FAILURE_ENABLE_PARAM, int(self._injection_enabled))
 
-    def _open_zenoh(self, c: dict[str, Any], m: int) -> None:
-        if not _enabled(c, "zenoh"):
-            return
-        from bridges.zenoh_io.config import SHIPPED_CONFIGS, ZenohConfigError, shipped_config_path
+    def _open_zenoh(self, c: ZenohSettings, m: int) -> None:
         from bridges.zenoh_io.link import ZenohLinkError, ZenohVesselLink, load_config
 
-        name = str(c.get("config", "vessel.json5"))  # a file, else a shipped config's name
-        path = Path(name)
-        if not path.exists() and name.removesuffix(".json5") in SHIPPED_CONFIGS:
-            path = shipped_config_path(name.removesuffix(".json5"))
-        overrides = c.get("overrides", [])  # as the allocator's [zenoh] table
-        if not isinstance(overrides, list):
-            raise ConfigError(f"zenoh.overrides: expected a list of 'KEY:VALUE', got {overrides!r}")
-        if "connect" in c:
-            connect = c["connect"] if isinstance(c["connect"], list) else [c["connect"]]
-            overrides = [f"connect/endpoints:{json.dumps(connect)}", *overrides]
+        conf = load_config(c.config, list(c.overrides))  # ZenohConfigError: a ConfigError
         try:
-            conf = load_config(path, [str(o) for o in overrides])
-            self.zenoh = ZenohVesselLink(str(c.get("vessel", "ftcap1")), conf, n_thrusters=m)
-        except (ZenohConfigError, ZenohLinkError, ValueError) as e:
+            self.zenoh = ZenohVesselLink(c.vessel, conf, n_thrusters=m)
+        except ZenohLinkError as e:
             raise PortError(f"zenoh: {e}") from e
         self._stack.callback(self.zenoh.shutdown)
 
@@ -216,13 +198,6 @@ class VesselPorts:
     def shutdown(self) -> None:
         """Close every port opened, newest first. Idempotent."""
         self._stack.close()
-
-
-def _enabled(table: dict[str, Any], section: str) -> bool:
-    enabled = table.get("enabled", True)
-    if not isinstance(enabled, bool):
-        raise ConfigError(f"{section}.enabled: expected true/false, got {enabled!r}")
-    return enabled
 
 
 MAX_CATCH_UP_STEPS = 5  # a late step integrates at most this many nominal steps

@@ -14,17 +14,15 @@ from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, LinkConfigError, M
 from bridges.mavlink.params import ParamSpec, ParamType
 from ftcap_hil.core.messages import ThrusterCommand
 from ftcap_hil.core.status import AllocatorStatus
-from tests.contract.test_mavlink_support import (
+from tests.contract.mavlink_support import (
     DIALECT,
     RawPeer,
     free_udp_ports,
-    no_leaked_threads,
     send_datagram,
     wait_until,
 )
 
 pytestmark = [pytest.mark.timeout(30), pytest.mark.usefixtures("no_leaked_threads")]
-__all__ = ["no_leaked_threads"]
 
 MAX_WRENCH = (100.0, 50.0, 200.0)
 SYS, COMP = ALLOCATOR_IDS

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from bridges.mavlink import dialect as mavlink_dialect
-from tests.contract.test_mavlink_support import DIALECT
+from tests.contract.mavlink_support import DIALECT
 
 
 def _message_ids(xml: Path) -> dict[int, str]:

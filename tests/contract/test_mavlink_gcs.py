@@ -24,16 +24,14 @@ from bridges.mavlink.vessel import (
 )
 from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry, ThrusterCommand
 from ftcap_hil.core.status import AllocatorStatus
-from tests.contract.test_mavlink_support import (
+from tests.contract.mavlink_support import (
     DIALECT,
     RawPeer,
     free_udp_ports,
-    no_leaked_threads,
     wait_until,
 )
 
 pytestmark = [pytest.mark.timeout(30), pytest.mark.usefixtures("no_leaked_threads")]
-__all__ = ["no_leaked_threads"]
 
 
 @pytest.fixture

@@ -26,7 +26,7 @@ from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
 from ftcap_hil.core.messages import FaultInjection, FaultKind
-from tests.contract.test_mavlink_support import free_udp_ports, no_leaked_threads, wait_until
+from tests.contract.mavlink_support import free_udp_ports, wait_until
 
 MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
 pytestmark = [
@@ -34,7 +34,6 @@ pytestmark = [
     pytest.mark.usefixtures("no_leaked_threads"),
     pytest.mark.skipif(not MAVPROXY.exists(), reason="MAVProxy is not installed"),
 ]
-__all__ = ["no_leaked_threads"]
 
 
 class MavproxySession:

@@ -21,15 +21,13 @@ from bridges.mavlink.vessel import (
     decode_inject_failure,
 )
 from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry
-from tests.contract.test_mavlink_support import (
+from tests.contract.mavlink_support import (
     DIALECT,
     RawPeer,
     free_udp_ports,
-    no_leaked_threads,
 )
 
 pytestmark = [pytest.mark.timeout(30), pytest.mark.usefixtures("no_leaked_threads")]
-__all__ = ["no_leaked_threads"]
 
 SYS, COMP = VESSEL_IDS
 M = 4

@@ -8,7 +8,7 @@ this process's environment, as compose reads the shell's) and its splitting of s
 commands applied; the eclipse/zenoh router replaced by a router session of the same Zenoh
 release from the same mounted file; ``service_healthy`` waited for by running the service's
 own healthcheck. Container names and ports are mapped onto 127.0.0.1 and free ports, the same
-way in arguments, mounted files, health checks and published ports (test_compose_local.py).
+way in arguments, mounted files, health checks and published ports (compose_local.py).
 
 It checks that the mission completes (exit 0) with every fault identified in results.json,
 that a host GCS on the published MAVLink ports hears the vessel and the allocator, that the
@@ -34,7 +34,7 @@ from typing import Any
 
 import pytest
 
-from tests.docker.test_compose_files import (
+from tests.docker.compose_files import (
     COMPOSE,
     COMPOSE_VCAN,
     EXIT_SERVICE,
@@ -47,7 +47,7 @@ from tests.docker.test_compose_files import (
     start_order,
     unknown_set_keys,
 )
-from tests.docker.test_compose_local import (
+from tests.docker.compose_local import (
     LOCAL,
     ComposeRunError,
     LocalCompose,

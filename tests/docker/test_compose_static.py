@@ -27,7 +27,7 @@ from typing import Any
 
 import pytest
 
-from tests.docker.test_compose_files import (
+from tests.docker.compose_files import (
     COMPOSE,
     COMPOSE_VCAN,
     DOCKER,

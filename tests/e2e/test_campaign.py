@@ -39,9 +39,9 @@ source = "paper-4.2-ex1"
 label = "paper"
 faults = "random"
 
-[variant.broken]          # raises inside the run: no such QP backend
+[variant.broken]          # raises inside the run: the filter's initial variance overflows
 mode = "ftcap"
-allocator = { backend = "no-such-solver" }
+estimator = { initial_delta_std = 1e300 }
 
 [faults]
 kinds = ["dead", "intermittent"]
@@ -197,7 +197,7 @@ def test_a_run_that_raises_is_a_recorded_failure(on_scheduler: Path) -> None:
     broken = [r for r in rows.values() if r["variant"] == "broken"]
     assert len(broken) == 5
     for row in broken:
-        assert row["status"] == "failed" and "no-such-solver" in row["error"], row["error"]
+        assert row["status"] == "failed" and "OverflowError" in row["error"], row["error"]
         assert "Traceback" in row["error"] and row["replay"].startswith("ftcap-hil simulate")
     summary = (on_scheduler / "summary.md").read_text()
     assert "## Failed runs" in summary and "paper/s1/dead/broken" in summary

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.e2e.test_demo_support import child_pids, ftcap_hil, is_ours_and_alive, reap, wait_for
+from tests.e2e.demo_support import child_pids, ftcap_hil, is_ours_and_alive, reap, wait_for
 
 pytestmark = pytest.mark.e2e
 

@@ -22,7 +22,7 @@ from pymavlink import mavutil
 
 from bridges.mavlink import dialect as mavlink_dialect
 from bridges.zenoh_io.link import make_config
-from tests.e2e.conftest import ALLOCATOR_NODE, RAW_MAX, RawFrame, Rig, SetpointLoop, wait_until
+from tests.e2e.rig import ALLOCATOR_NODE, RAW_MAX, RawFrame, Rig, setpoints, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 
@@ -94,7 +94,7 @@ def test_malformed_setpoints_are_dropped_and_never_reach_the_bus(
     hil.closers.append(mav.close)
     pub = zenoh_session().declare_publisher(SETPOINT_KEY)
     assert wait_until(lambda: pub.matching_status.matching, 20.0), alloc.log()
-    with SetpointLoop(gcs, tau=GOOD):
+    with setpoints(gcs, tau=GOOD):
         assert wait_until(lambda: len(tap.commands()) > 5, 10.0), alloc.log()
         time.sleep(1.0)
     before = tap.latest()
@@ -122,7 +122,7 @@ def test_malformed_setpoints_are_dropped_and_never_reach_the_bus(
     assert {f.raw for f in during} == {before.raw}, [f.raw for f in during]
     # and still listens on both transports: a good setpoint on each moves the thrusters
     t_good = time.monotonic_ns()
-    with SetpointLoop(gcs, tau=[-0.1, 0.0, 0.0]):
+    with setpoints(gcs, tau=[-0.1, 0.0, 0.0]):
         ok = wait_until(lambda: any(_signs(f) == (-1, -1, 1, 1) for f in tap.commands(t_good)), 5)
         assert ok, [f.raw for f in tap.commands(t_good)]
     t_good = time.monotonic_ns()
@@ -152,7 +152,7 @@ def test_the_malformed_count_is_reported(hil: Rig, zenoh_session: Any) -> None:
     session.declare_subscriber(STATUS_KEY, on_status)
     pub = session.declare_publisher(SETPOINT_KEY)
     assert wait_until(lambda: pub.matching_status.matching, 20.0), alloc.log()
-    with SetpointLoop(gcs, tau=GOOD):
+    with setpoints(gcs, tau=GOOD):
         for surge, sway, yaw in BAD_MAVLINK:
             mav.mav.wrench_setpoint_send(0, 1, 191, surge, sway, yaw)
         for payload in BAD_ZENOH:
@@ -179,12 +179,12 @@ def test_an_absurd_finite_zenoh_setpoint_does_not_stop_the_allocator(
     tap = hil.tap()
     pub = zenoh_session().declare_publisher(SETPOINT_KEY)
     assert wait_until(lambda: pub.matching_status.matching, 20.0), alloc.log()
-    with SetpointLoop(gcs, tau=GOOD):
+    with setpoints(gcs, tau=GOOD):
         time.sleep(1.0)
     pub.put(f'{{"v":1,"X_N":{huge},"Y_N":0.0,"N_Nm":0.0}}'.encode())
     time.sleep(1.5)
     assert alloc.running(), alloc.log()[-3000:]
     t_good = time.monotonic_ns()
-    with SetpointLoop(gcs, tau=[-0.1, 0.0, 0.0]):
+    with setpoints(gcs, tau=[-0.1, 0.0, 0.0]):
         ok = wait_until(lambda: any(_signs(f) == (-1, -1, 1, 1) for f in tap.commands(t_good)), 5)
     assert ok and _in_range(tap.commands()), alloc.log()[-3000:]

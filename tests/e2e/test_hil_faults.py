@@ -21,7 +21,7 @@ from bridges.mavlink.config import VESSEL_IDS
 from bridges.mavlink.gcs import MavlinkGcsLink
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavResult
 from ftcap_hil.core.messages import FaultInjection, FaultKind
-from tests.e2e.conftest import Rig, SetpointLoop, wait_until
+from tests.e2e.rig import Rig, setpoints, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 
@@ -58,7 +58,7 @@ def test_faults_injected_over_mavlink_and_zenoh_are_estimated_while_holding_posi
     assert zgcs.subscribers_matched(timeout_s=20.0), hil.logs()
     assert gcs.set_param(VESSEL_IDS, FAILURE_ENABLE_PARAM, 1) == 1.0
     sim = hil.procs["sim"]
-    with SetpointLoop(gcs, hold=np.zeros(3)) as loop:
+    with setpoints(gcs, hold=np.zeros(3)) as loop:
         time.sleep(3.0)
         healthy = _delta_hat(gcs)
         assert np.all(np.abs(healthy - 1.0) < TOL), healthy

@@ -15,12 +15,12 @@ import pytest
 
 from bridges.mavlink.codec import SystemStatus
 from bridges.mavlink.gcs import MavlinkGcsLink
-from tests.e2e.conftest import (
+from tests.e2e.rig import (
     RAW_MAX,
     Rig,
-    SetpointLoop,
     latest_odometry,
     record_raw,
+    setpoints,
     texts,
     wait_until,
 )
@@ -55,7 +55,7 @@ def test_setpoints_reach_the_thrusters_and_move_the_vessel(hil: Rig) -> None:
     for axis, (name, tau, signs) in enumerate(AXES):
         nu_before = latest_odometry(gcs).nu
         t0 = time.monotonic_ns()
-        with SetpointLoop(gcs, tau=tau, period_s=0.1):
+        with setpoints(gcs, tau=tau, period_s=0.1):
             time.sleep(2.0)
             assert allocator_state(gcs) == SystemStatus.ACTIVE, name
         frames = tap.commands(t0)
@@ -127,7 +127,7 @@ def test_a_silent_esc_is_a_failed_thruster(hil: Rig, silence: str, esc3_texts: l
     got: list[tuple[int, str]] = []
     hil.start_sim([silence])
     tap = hil.tap()
-    with SetpointLoop(gcs, tau=[0.1, 0.0, 0.0]):
+    with setpoints(gcs, tau=[0.1, 0.0, 0.0]):
         ok = wait_until(lambda: [t for _, t in _esc3(gcs, got)] == esc3_texts, 20.0)
         assert ok, got
         t_failed = _esc3(gcs, got)[-1][0]
@@ -168,7 +168,7 @@ def test_no_probe_commands_to_a_silent_esc(hil: Rig) -> None:
     hil.start_sim(["sim.silent_thrusters=[3]"])
     tap = hil.tap()
     got: list[tuple[int, str]] = []
-    with SetpointLoop(gcs, tau=[0.1, 0.0, 0.0]):
+    with setpoints(gcs, tau=[0.1, 0.0, 0.0]):
         assert wait_until(lambda: [t for _, t in _esc3(gcs, got)] == [WAIT3, FAILED3], 20.0), got
         t_failed = _esc3(gcs, got)[-1][0]
         time.sleep(6.0)

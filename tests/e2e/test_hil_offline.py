@@ -44,7 +44,7 @@ from ftcap_hil.config.scenario import parse_scenario
 from ftcap_hil.core.controllers import PoseController
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.offline import run_mode
-from tests.e2e.conftest import Rig, latest_odometry, odometry_state, wait_until
+from tests.e2e.rig import Rig, latest_odometry, odometry_state, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 

@@ -15,7 +15,7 @@ import time
 import pytest
 
 from bridges.mavlink.gcs import MavlinkGcsLink
-from tests.e2e.conftest import BusTap, Proc, Rig, SetpointLoop, record_raw, wait_until
+from tests.e2e.rig import BusTap, Proc, Rig, record_raw, setpoints, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 
@@ -39,7 +39,7 @@ def _running_rig(hil: Rig) -> tuple[MavlinkGcsLink, Proc, BusTap]:
 
 def test_sigterm_sends_zero_last_and_exits_0(hil: Rig) -> None:
     gcs, alloc, tap = _running_rig(hil)
-    with SetpointLoop(gcs, tau=TAU):
+    with setpoints(gcs, tau=TAU):
         assert wait_until(lambda: all(v != 0 for v in tap.rpm()), 10.0), tap.rpm()
         time.sleep(1.0)
         t_term = time.monotonic_ns()
@@ -71,7 +71,7 @@ def test_sigterm_sends_zero_last_and_exits_0(hil: Rig) -> None:
 
 def test_sigkill_leaves_the_sim_watchdog_to_stop_the_thrusters(hil: Rig) -> None:
     gcs, alloc, tap = _running_rig(hil)
-    with SetpointLoop(gcs, tau=TAU):
+    with setpoints(gcs, tau=TAU):
         assert wait_until(lambda: all(v != 0 for v in tap.rpm()), 10.0), tap.rpm()
         time.sleep(1.0)
         alloc.send(signal.SIGKILL)

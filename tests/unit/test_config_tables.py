@@ -93,7 +93,7 @@ def test_typed_getters_return_typed_values_and_defaults() -> None:
         ("u = 1", lambda t: t.table("u"), "[t] u: expected a table, got 1"),
         ("u = {a = 1}", lambda t: t.tables("u"), "[t] u: expected an array of tables [[u]]"),
         ("", lambda t: t.number("x"), "f.toml: [t] x: missing"),
-        ("", lambda t: t.tables("w", required=True), "[t] w: missing"),
+        ("", lambda t: t.tables("w", required=True), "f.toml: [[t.w]] missing"),
     ],
 )
 def test_bad_values_name_file_table_key_value_and_form(text, read, message) -> None:
@@ -221,6 +221,16 @@ def test_config_errors_exit_with_the_config_code() -> None:
     with pytest.raises(ConfigError) as info:
         table("[t]\n").number("x")
     assert info.value.exit_code is ExitCode.CONFIG
+
+
+def test_a_missing_key_or_table_names_a_close_typo() -> None:
+    root = Table(parse_toml("[dampng]\nX_u = 1.0\n[vessel]\nu_mn = 1\n", "p"), "p.toml")
+    with raises("p.toml: [damping] missing ('dampng' is given: a typo?)"):
+        root.table("damping", required=True)
+    with raises("p.toml: [vessel] u_min: missing ('u_mn' is given: a typo?)"):
+        root.table("vessel").number("u_min")
+    with raises("p.toml: [[reference]] missing"):
+        root.tables("reference", required=True)
 
 
 def test_nearest() -> None:

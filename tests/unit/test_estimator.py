@@ -14,7 +14,7 @@ from ftcap_hil.core.estimator import (
     wrench_scale,
 )
 from ftcap_hil.core.geometry import ThrusterSet, effectiveness, paper_four_thrusters
-from tests.unit.test_geometry import six_thrusters
+from tests.unit.support import six_thrusters
 
 VESSELS = {"paper4": paper_four_thrusters, "six": six_thrusters}
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 
 import numpy as np
@@ -307,27 +308,21 @@ def test_scenario_without_kind_is_a_step() -> None:
 
 
 @pytest.mark.parametrize(
-    ("entry", "pattern"),
+    ("entry", "message"),
     [
-        ('kind = "ramps"\ndelta = 0.5', r"unit.toml.fault\[0\].kind: 'ramps' not one of"),
-        ('kind = "ramp"\ndelta = 0.5', r"fault\[0\].ramp_s: missing"),
-        ("ramp_s = 3.0\ndelta = 0.5", r"fault\[0\].ramp_s: only for kind = 'ramp'"),
-        (
-            'kind = "ramp"\non_s = 1.0\nramp_s = 2.0',
-            r"fault\[0\].on_s: only for kind = 'intermittent'",
-        ),
+        ('kind = "ramps"\ndelta = 0.5', "kind: 'ramps' is not one of 'step', 'ramp'"),
+        ('kind = "ramp"\ndelta = 0.5', "ramp_s: missing"),
+        ("ramp_s = 3.0\ndelta = 0.5", "ramp_s: only for kind = 'ramp'"),
+        ('kind = "ramp"\non_s = 1.0\nramp_s = 2.0', "on_s: only for kind = 'intermittent'"),
         (
             'kind = "intermittent"\non_s = 1.0\noff_s = 1.0\ndelta = 0.0',
-            r"fault\[0\]: .*finite end",
+            "intermittent fault: needs a finite end",
         ),
-        ('kind = "stuck"\ndelta = 0.0', r"fault\[0\]: stuck fault: takes no delta"),
-        (
-            'kind = "ramp"\nramp_s = -1.0\ndelta = 0.5',
-            r"fault\[0\]: ramp fault: ramp_s must be > 0",
-        ),
-        ("until = 0.5\ndelta = 0.5", r"fault\[0\]: .*start < end"),
+        ('kind = "stuck"\ndelta = 0.0', "stuck fault: takes no delta"),
+        ('kind = "ramp"\nramp_s = -1.0\ndelta = 0.5', "ramp fault: ramp_s must be > 0"),
+        ("until = 0.5\ndelta = 0.5", "until: expected a time after from = 1, got 0.5"),
     ],
 )
-def test_scenario_profile_key_errors(entry: str, pattern: str) -> None:
-    with pytest.raises(ConfigError, match=pattern):
+def test_scenario_profile_key_errors(entry: str, message: str) -> None:
+    with pytest.raises(ConfigError, match=re.escape(f"unit.toml: [[fault]][0] {message}")):
         parse_faults(f"[[fault]]\nfrom = 1.0\nthruster = 1\n{entry}\n")

@@ -11,7 +11,7 @@ import pytest
 from ftcap_hil.core.decisions import FaultDecider
 from ftcap_hil.core.estimator import EstimatorConfig, wrench_scale
 from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
-from ftcap_hil.core.kalman import KalmanEstimator, VesselStep
+from ftcap_hil.core.kalman import KalmanEstimator, VesselStep, step_model
 from ftcap_hil.core.plants import SurfaceVessel
 
 THS = paper_four_thrusters()
@@ -182,3 +182,86 @@ def test_a_thruster_bias_is_attributed_an_environmental_offset_is_not() -> None:
     dec = _decide(kf, decider, np.ones(4), f_env, 30)
     assert dec is not None and not dec.bias_faulty.any()
     np.testing.assert_array_equal(dec.bf_alloc, np.zeros(3))
+
+
+# --- the pose step and the wave model (realistic scenarios) ---------------------------
+
+
+@pytest.mark.parametrize("preset", ["cybership2", "supply"])
+@pytest.mark.parametrize("dt", [0.1, 0.5, 2.0])
+def test_pose_step_jacobians_match_finite_differences(preset: str, dt: float) -> None:
+    from ftcap_hil.config.presets import load_preset
+    from ftcap_hil.core.step_models import PoseStep
+
+    vessel = dataclasses.replace(load_preset(preset).vessel, inversion="trapezoid")
+    step = PoseStep(vessel)
+    scale = 1e5 if preset == "supply" else 1.0
+    s0 = np.array([1.0, 2.0, 0.7, 0.3, -0.1, 0.05])
+    w = np.array([0.8, -0.5, 0.3]) * scale
+    _s1, A, G = step.predict(s0, w, dt)
+    num_a = np.column_stack([
+        (step.predict(s0 + d, w, dt)[0] - step.predict(s0 - d, w, dt)[0]) / 2e-6
+        for d in np.eye(6) * 1e-6
+    ])  # fmt: skip
+    num_g = np.column_stack([
+        (step.predict(s0, w + d, dt)[0] - step.predict(s0, w - d, dt)[0]) / (2e-6 * scale)
+        for d in np.eye(3) * 1e-6 * scale
+    ])  # fmt: skip
+    np.testing.assert_allclose(A, num_a, atol=1e-5)
+    np.testing.assert_allclose(G, num_g, rtol=1e-4, atol=1e-6 * np.abs(num_g).max())
+
+
+def test_pose_innovation_wraps_the_heading() -> None:
+    from ftcap_hil.core.step_models import PoseStep
+
+    e = PoseStep(SurfaceVessel()).innovation(np.array([0, 0, -3.1, 0, 0, 0.0]),
+                                            np.array([0, 0, 3.1, 0, 0, 0.0]))  # fmt: skip
+    assert e[2] == pytest.approx(2 * np.pi - 6.2)
+
+
+def test_wave_model_is_stationary_at_the_told_level() -> None:
+    from ftcap_hil.core.wave_model import WaveModel
+
+    sigma = np.array([2.0, 3.0, 0.5])
+    model = WaveModel(2 * np.pi / 8.0, 0.1, sigma)
+    for dt in (0.1, 0.5, 2.0):
+        st = model.step(dt)
+        P = model.stationary_cov()
+        # the discrete model keeps the stationary covariance: Phi P Phi^T + Qd = P
+        np.testing.assert_allclose(st.phi @ P @ st.phi.T + st.q, P, rtol=1e-9, atol=1e-12)
+        assert model.step(dt) is st  # cached
+    # over a short interval the mean force is the force at its start
+    np.testing.assert_allclose(model.step(1e-6).mean[0, :2], [0.0, 1.0], atol=1e-5)
+
+
+def test_wave_states_explain_an_oscillating_load() -> None:
+    """A vessel pushed by a 0.5 rad/s sinusoid the size of its thrusters, thrusters
+    healthy: with the wave states the effectiveness stays at 1 and nothing alarms;
+    without, the load is taken for a change."""
+    plant = SurfaceVessel()
+    B = effectiveness(paper_four_thrusters(0.3))
+    scale = np.abs(B) @ np.full(4, 0.1)
+    std = (1e-4, 1e-4, 1e-4)
+    rng = np.random.default_rng(1)
+    for waves in (True, False):
+        cfg = EstimatorConfig(
+            measurement_std=std,
+            wave_period_s=2 * np.pi / 0.5 if waves else 0.0,
+            wave_force_std=tuple(0.7 * scale) if waves else None,
+        )
+        kf = KalmanEstimator(B, scale, plant, cfg)
+        step = step_model(plant)
+        nu = np.zeros(3)
+        alarms, low = 0, 1.0
+        kf.update(np.zeros(4), np.concatenate([np.zeros(3), nu]), 0.28, np.zeros(6))
+        for k in range(400):
+            u = 0.05 * rng.choice([-1.0, 1.0], 4)
+            load = scale * np.sin(0.5 * 0.28 * k)
+            nu, _A, _G = step.predict(nu, B @ u + load, 0.28)
+            out = kf.update(u, np.concatenate([np.zeros(3), nu + rng.normal(0, 1e-4, 3)]), 0.28)
+            alarms += out.alarm
+            low = min(low, float(out.estimate.delta_hat.min()))
+        if waves:
+            assert alarms == 0 and low > 0.9, (alarms, low)
+        else:
+            assert alarms > 0 or low < 0.9, (alarms, low)

@@ -175,11 +175,15 @@ def _write(tmp_path: Path, old: str, new: str) -> Path:
 @pytest.mark.parametrize(
     ("old", "new", "message"),
     [
-        ("[damping]", "[dampng]", r"unknown key 'dampng' \(did you mean 'damping'\?\)"),
-        ("X_u = ", "X_uh = ", r"\.damping: unknown key 'X_uh' \(did you mean 'X_u"),
-        ("u_max = 200000.0", "u_mx = 200000.0", r"thruster\[0\]: unknown key 'u_mx'"),
-        ("hs_m = ", "hs = ", r"environment\.waves: unknown key 'hs' \(did you mean 'hs_m'\?\)"),
-        ("mass = 0.0", "mass = 'heavy'", r"mismatch\.mass: expected a finite number"),
+        ("[damping]", "[dampng]", r"\[damping\] missing \('dampng' is given: a typo\?\)"),
+        ("X_u = ", "X_uh = ", r"\[damping\] unknown key 'X_uh' \(did you mean 'X_u'"),
+        ("u_max = 200000.0", "u_mx = 200000.0", r"\[\[thruster\]\]\[0\] u_max: missing \('u_mx'"),
+        ("hs_m = ", "hs = ", r"\[environment\.waves\] unknown key 'hs' \(did you mean 'hs_m'\?\)"),
+        (
+            "mass = 0.0",
+            "mass = 'heavy'",
+            r"\[mismatch\] mass: expected a finite number, got",
+        ),
         ("angle_deg = {}", "angle_deg = { bow_tunel_1 = 2.0 }", r"did you mean 'bow_tunnel_1'"),
         ("speed_m_s = 0.5", "speed_m_s = -0.5", r"current\.speed_m_s: must be finite and >= 0"),
     ],

@@ -6,10 +6,11 @@
 ``hil``: ``candump -L CHANNEL`` first (OUT/capture.log), then ``ftcap-hil sim`` (--record
 OUT/record.csv, log OUT/sim.log) and ``ftcap-hil allocator`` (--command-log OUT/commands.csv,
 log OUT/allocator.log), both on ``socketcan``/CHANNEL with Zenoh off and MAVLink on free
-loopback UDP ports. This script is the ground station (MavlinkGcsLink): it sets the
-vessel's SYS_FAILURE_EN = 1, flies eq. (24) on ODOMETRY every T_s (hold the origin, then a
-step of the reference), injects one fault with MAV_CMD_INJECT_FAILURE mid-run, and saves
-every FTCAP_STATUS it sees (OUT/status.json). At the end: SIGTERM to the allocator and its
+loopback UDP ports. This script is the ground station, through the product's driver
+(ftcap_hil.runtime.ground_station, as ``ftcap-hil gcs``): it sets the vessel's
+SYS_FAILURE_EN = 1, flies eq. (24) on ODOMETRY every T_s (hold the origin, then a step of
+the reference), injects one fault with MAV_CMD_INJECT_FAILURE mid-run, and saves every
+FTCAP_STATUS it sees (OUT/status.json). At the end: SIGTERM to the allocator and its
 exit code, then the sim and candump are stopped. OUT/summary.json says what happened
 (times on both clocks: ``monotonic`` for the sim's record, ``wall`` for candump's stamps).
 
@@ -29,8 +30,8 @@ Exit status: 0 if every step went through (the host-side test judges the artifac
 from __future__ import annotations
 
 import argparse
-import functools
 import json
+import logging
 import math
 import os
 import signal
@@ -42,6 +43,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
+
+from ftcap_hil.core.errors import FtcapError
 
 SYNC_ID = 0x7FF  # 11-bit frame cansend puts on the bus to see candump listening (not DroneCAN)
 T_S = 0.2827  # the paper's sample time: the ground station's period (3.54 Hz)
@@ -215,39 +218,154 @@ def bus_settings(bus: str, channel: str) -> list[str]:
 # --- hil ---------------------------------------------------------------------------------
 
 
-class Injector(threading.Thread):
-    """One MAV_CMD_INJECT_FAILURE off the flight loop (it waits for the COMMAND_ACK)."""
+def _alive(children: list[Child]) -> Callable[[], None]:
+    """The driver's ``check``: a child that exited ends the start-up or the flight."""
 
-    def __init__(self, gcs: Any, kind: Any, thruster: int, value: float) -> None:
-        super().__init__(name="injector", daemon=True)
-        self.gcs, self.kind, self.thruster, self.value = gcs, kind, thruster, value
-        self.result: str | None = None
-        self.sent_monotonic = math.nan
-        self.sent_wall = math.nan
+    def check() -> None:
+        for child in children:
+            if not child.alive():
+                raise StepError(f"{child.name} exited ({child.proc.returncode})")
 
-    def run(self) -> None:
-        self.sent_monotonic, self.sent_wall = time.monotonic(), time.time()
-        ack = self.gcs.inject_failure(
-            self.kind, self.thruster, self.value, timeout_s=2.0, attempts=5
-        )
-        self.result = "NO_ACK" if ack is None else ack.name
+    return check
+
+
+def _flight_plan(opts: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
+    """The driver's plan (eq. (24) toward the origin, then the step; one injection) and its
+    summary entry."""
+    import numpy as np
+
+    from ftcap_hil.core.faults import Injection
+    from ftcap_hil.core.messages import FaultKind
+    from ftcap_hil.runtime.ground_station import FlightPlan, WrenchLaw
+
+    step_to = np.array([float(v) for v in opts.step_to])
+    inject = opts.fault_kind != "NONE"
+    kind = FaultKind[opts.fault_kind] if inject else FaultKind.OK
+    plan = FlightPlan(
+        WrenchLaw.track(lambda t: step_to if t >= opts.step_at else np.zeros(3)),
+        T_S,
+        duration_s=opts.run_s,
+        injections=(Injection(opts.fault_at, opts.fault_thruster, kind, opts.fault_value),)
+        if inject
+        else (),
+        odometry_timeout_s=10.0,
+        keep_statuses=True,
+        inject_timeout_s=2.0,
+        inject_attempts=5,
+    )
+    fault = {
+        "at_s": opts.fault_at,
+        "thruster": opts.fault_thruster,
+        "kind": kind.name,
+        "value": None if math.isnan(opts.fault_value) else opts.fault_value,
+    }
+    summary = {
+        "period_s": T_S,
+        "run_s": opts.run_s,
+        "reference": [[0.0, [0.0, 0.0, 0.0]], [opts.step_at, step_to.tolist()]],
+        "sim_set": opts.sim_set,
+        "fault": fault if inject else None,
+    }
+    return plan, summary
+
+
+def _status_row(st: Any, t0_s: float) -> dict[str, Any]:
+    s = st.value
+    return {
+        "t_s": st.stamp_ns * 1e-9 - t0_s,
+        "monotonic_s": st.stamp_ns * 1e-9,
+        "delta_hat": list(s.delta_hat),
+        "f_hat": list(s.f_hat),
+        "tau_demand": list(s.tau_demand),
+        "tau_unallocated": list(s.unallocated),
+        "fault_detected": s.fault_detected,
+        "faulty": list(s.faulty),
+    }
+
+
+def fly(opts: argparse.Namespace, gcs: Any, children: list[Child], summary: dict[str, Any]) -> Any:
+    """Start-up and flight through the product's ground-station driver; the flight."""
+    from ftcap_hil.runtime.ground_station import GroundStation
+
+    station = GroundStation(gcs, check=_alive(children))
+    # Its heartbeat says BOOT until the allocator's loop has run a cycle: under TCG the
+    # core's set-up takes seconds after the link is up (connect waits for it).
+    conn = station.connect(
+        opts.start_timeout_s, enable_failures=True, read_mode=False, param_timeout_s=3.0
+    )
+    summary["heartbeats_monotonic"] = conn.heartbeats_ns * 1e-9
+    summary["allocator_ready_monotonic"] = conn.ready_ns * 1e-9
+    summary["sys_failure_en"] = conn.failure_enable
+    t0 = conn.t0_ns * 1e-9
+    summary["t0_monotonic"] = t0
+    summary["t0_wall"] = time.time() - (time.monotonic() - t0)
+    plan, summary["plan"] = _flight_plan(opts)
+    flight = station.flight(plan, conn.t0_ns)
+    flight.run()
+    summary["gcs"] = {
+        "cycles": flight.cycles,
+        "overruns": flight.overruns,
+        "wrench_send_failures": flight.send_failures,
+        "statuses": len(flight.statuses),
+        "statustexts": [
+            {
+                "t_s": item.stamp_ns * 1e-9 - t0,
+                "from": [item.value.system, item.value.component],
+                "text": item.value.text,
+            }
+            for item in flight.texts
+        ],
+    }
+    out = flight.outcomes[0] if flight.outcomes else None
+    summary["injection"] = {
+        "result": None if out is None else out.result,
+        "sent_monotonic": math.nan if out is None else t0 + out.sent_at_s,
+        "sent_wall": math.nan if out is None else out.sent_wall_s,
+        "sent_t_s": math.nan if out is None else out.sent_at_s,
+    }
+    return flight
+
+
+def start_peers(
+    opts: argparse.Namespace, can: list[str], ports: tuple[int, int, int], children: list[Child]
+) -> tuple[Child, Child]:
+    """The sim and the allocator on the bus and on loopback MAVLink (gcs, vessel, allocator
+    UDP ports), appended to ``children`` as they start."""
+    out: Path = opts.out
+    gcs_port, vessel_port, alloc_port = ports
+    sim = Child(
+        "sim",
+        cli("sim", "--record", str(out / "record.csv"), *sets([
+            *can, "zenoh.enabled=false", *SIM_SETTINGS, *opts.sim_set,
+            f'mavlink.connection="udpin:127.0.0.1:{vessel_port}"',
+            f'mavlink.peers=["127.0.0.1:{alloc_port}", "127.0.0.1:{gcs_port}"]',
+        ])),
+        out / "sim.log",
+    )  # fmt: skip
+    children.append(sim)
+    alloc = Child(
+        "allocator",
+        cli("allocator", "--command-log", str(out / "commands.csv"), *sets([
+            *can, "zenoh.enabled=false", *ALLOCATOR_SETTINGS,
+            f'mavlink.connection="udpin:127.0.0.1:{alloc_port}"',
+            f'mavlink.peers=["127.0.0.1:{gcs_port}"]',
+        ])),
+        out / "allocator.log",
+    )  # fmt: skip
+    children.append(alloc)
+    return sim, alloc
 
 
 def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
-    import numpy as np
-
     from bridges.mavlink.config import GCS_IDS, MavlinkEndpoint
     from bridges.mavlink.gcs import MavlinkGcsLink
-    from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM
-    from ftcap_hil.core.controllers import PoseController
-    from ftcap_hil.core.messages import FaultKind
 
     out: Path = opts.out
     gcs_port, vessel_port, alloc_port = free_udp_port(), free_udp_port(), free_udp_port()
     children: list[Child] = []
     capture: Capture | None = None
     hub = None
-    statuses: list[dict[str, Any]] = []
+    flight = None
     try:
         channel = opts.channel
         if opts.bus == "canhub":
@@ -259,151 +377,26 @@ def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
         capture.wait_listening(opts.start_timeout_s)
         summary["capture_started_wall"] = time.time()
         can = bus_settings(opts.bus, channel)
-        sim = Child(
-            "sim",
-            cli("sim", "--record", str(out / "record.csv"), *sets([
-                *can, "zenoh.enabled=false", *SIM_SETTINGS, *opts.sim_set,
-                f'mavlink.connection="udpin:127.0.0.1:{vessel_port}"',
-                f'mavlink.peers=["127.0.0.1:{alloc_port}", "127.0.0.1:{gcs_port}"]',
-            ])),
-            out / "sim.log",
-        )  # fmt: skip
-        children.append(sim)
-        alloc = Child(
-            "allocator",
-            cli("allocator", "--command-log", str(out / "commands.csv"), *sets([
-                *can, "zenoh.enabled=false", *ALLOCATOR_SETTINGS,
-                f'mavlink.connection="udpin:127.0.0.1:{alloc_port}"',
-                f'mavlink.peers=["127.0.0.1:{gcs_port}"]',
-            ])),
-            out / "allocator.log",
-        )  # fmt: skip
-        children.append(alloc)
+        sim, alloc = start_peers(opts, can, (gcs_port, vessel_port, alloc_port), children)
         endpoint = MavlinkEndpoint.inbox(gcs_port, GCS_IDS, (alloc_port, vessel_port))
         with MavlinkGcsLink(endpoint) as gcs:
-            for name, ids in (("vessel", gcs.vessel_ids), ("allocator", gcs.allocator_ids)):
-                wait_for(
-                    f"HEARTBEAT from the {name}",
-                    functools.partial(gcs.heartbeat, ids),
-                    opts.start_timeout_s,
-                    children,
-                )
-            summary["heartbeats_monotonic"] = time.monotonic()
-            # Its heartbeat says BOOT until the allocator's loop has run a cycle: under TCG
-            # the core's set-up takes seconds after the link is up.
-            wait_for(
-                "the allocator's loop (HEARTBEAT past MAV_STATE_BOOT)",
-                functools.partial(gcs.wait_ready, gcs.allocator_ids, 0.1),
-                opts.start_timeout_s,
-                children,
-            )
-            summary["allocator_ready_monotonic"] = time.monotonic()
-            enabled = gcs.set_param(gcs.vessel_ids, FAILURE_ENABLE_PARAM, 1, timeout_s=3.0)
-            summary["sys_failure_en"] = enabled
-            if enabled != 1:
-                raise StepError(f"the vessel answered {FAILURE_ENABLE_PARAM} = {enabled}")
-            first = wait_for("ODOMETRY", gcs.odometry.latest, opts.start_timeout_s, children)
-            t0 = first.stamp_ns * 1e-9
-            summary["t0_monotonic"] = t0
-            summary["t0_wall"] = time.time() - (time.monotonic() - t0)
-            inject = opts.fault_kind != "NONE"
-            kind = FaultKind[opts.fault_kind] if inject else FaultKind.OK
-            injector = Injector(gcs, kind, opts.fault_thruster, opts.fault_value)
-            law = PoseController()
-            step_to = [float(v) for v in opts.step_to]
-            summary["plan"] = {
-                "period_s": T_S,
-                "run_s": opts.run_s,
-                "reference": [[0.0, [0.0, 0.0, 0.0]], [opts.step_at, step_to]],
-                "sim_set": opts.sim_set,
-                "fault": None
-                if not inject
-                else {
-                    "at_s": opts.fault_at,
-                    "thruster": opts.fault_thruster,
-                    "kind": kind.name,
-                    "value": None if math.isnan(opts.fault_value) else opts.fault_value,
-                },
-            }
-            cycles = overruns = 0
-            wrench_refused = 0
-            texts: list[dict[str, Any]] = []
-            last_status_stamp = -1
-            deadline = time.monotonic()
-            while True:
-                now = time.monotonic()
-                t = now - t0
-                if t >= opts.run_s:
-                    break
-                for child in children:
-                    if not child.alive():
-                        raise StepError(f"{child.name} exited ({child.proc.returncode}) mid-run")
-                odom = gcs.odometry.latest()
-                assert odom is not None  # there was a first one
-                age = now - odom.stamp_ns * 1e-9
-                if age > 10.0:
-                    raise StepError(f"no ODOMETRY for {age:.1f} s at t = {t:.1f} s")
-                x = np.concatenate([odom.value.eta, odom.value.nu])
-                ref = np.array(step_to if t >= opts.step_at else [0.0, 0.0, 0.0])
-                v = law(x, ref)
-                if not gcs.send_wrench(v.tolist()):
-                    wrench_refused += 1
-                if inject and t >= opts.fault_at and injector.ident is None:
-                    injector.start()
-                st = gcs.allocator_status.latest()
-                if st is not None and st.stamp_ns != last_status_stamp:
-                    last_status_stamp = st.stamp_ns
-                    s = st.value
-                    statuses.append({
-                        "t_s": st.stamp_ns * 1e-9 - t0,
-                        "monotonic_s": st.stamp_ns * 1e-9,
-                        "delta_hat": list(s.delta_hat),
-                        "f_hat": list(s.f_hat),
-                        "tau_demand": list(s.tau_demand),
-                        "tau_unallocated": list(s.unallocated),
-                        "fault_detected": s.fault_detected,
-                        "faulty": list(s.faulty),
-                    })  # fmt: skip
-                for item in gcs.drain_statustexts():
-                    texts.append({
-                        "t_s": item.stamp_ns * 1e-9 - t0,
-                        "from": [item.value.system, item.value.component],
-                        "text": item.value.text,
-                    })  # fmt: skip
-                cycles += 1
-                deadline += T_S
-                late = time.monotonic() - deadline
-                if late > 0:
-                    missed = int(late // T_S) + 1
-                    overruns += missed
-                    deadline += missed * T_S
-                time.sleep(max(0.0, deadline - time.monotonic()))
-            summary["gcs"] = {
-                "cycles": cycles,
-                "overruns": overruns,
-                "wrench_send_failures": wrench_refused,
-                "statuses": len(statuses),
-                "statustexts": texts,
-            }
-            if injector.ident is not None:
-                injector.join(30.0)
-            summary["injection"] = {
-                "result": injector.result,
-                "sent_monotonic": injector.sent_monotonic,
-                "sent_wall": injector.sent_wall,
-                "sent_t_s": injector.sent_monotonic - t0,
-            }
-            # The end: SIGTERM to the allocator while the sim still runs, its exit code.
+            flight = fly(opts, gcs, children, summary)
+            # The end: SIGTERM to the allocator while the sim still runs, its exit code. No
+            # wind-down: the allocator's own zero on SIGTERM is what the tests judge, and the
+            # injected fault stays on the vessel (its record is the truth they compare with).
             summary["sigterm_wall"] = time.time()
             summary["sigterm_monotonic"] = time.monotonic()
             summary["allocator_exit"] = alloc.stop(opts.stop_timeout_s)
             summary["allocator_exited_wall"] = time.time()
         summary["sim_exit"] = sim.stop(opts.stop_timeout_s)
         summary["capture_exit"] = capture.stop()
-        if inject and injector.result != "ACCEPTED":
-            raise StepError(f"fault injection: {injector.result}")
+        result = summary["injection"]["result"]
+        if flight.plan.injections and result != "ACCEPTED":
+            raise StepError(f"fault injection: {result}")
     finally:
-        (out / "status.json").write_text(json.dumps(statuses))
+        statuses = [] if flight is None else flight.statuses
+        t0 = summary.get("t0_monotonic", 0.0)
+        (out / "status.json").write_text(json.dumps([_status_row(st, t0) for st in statuses]))
         for child in children:
             child.close()
         if capture is not None:
@@ -525,12 +518,15 @@ def parse(argv: list[str]) -> argparse.Namespace:
 def main(argv: list[str]) -> int:
     opts = parse(argv)
     opts.out.mkdir(parents=True, exist_ok=True)
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
+    )
     started = time.monotonic()
     summary: dict[str, Any] = {"kind": opts.what, "bus": opts.bus, "channel": opts.channel}
     run = run_hil if opts.what == "hil" else run_idle
     try:
         run(opts, summary)  # fills summary as it goes; cleans up after itself
-    except StepError as e:
+    except (StepError, FtcapError) as e:  # the driver's: no answer, refused, link lost
         summary.setdefault("errors", []).append(str(e))
     except Exception as e:  # the summary must say what broke, whatever it was
         import traceback

@@ -1,4 +1,4 @@
-"""Helpers for the MAVLink contract tests (no tests here).
+"""Helpers for the MAVLink contract tests (no tests here; the fixtures are in conftest.py).
 
 The far end of every contract test is bare pymavlink (``RawPeer``) with the ftcap dialect,
 on real loopback UDP: never our own transport pretending to be the other side.
@@ -10,10 +10,8 @@ import os
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
-
-import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 
@@ -94,13 +92,6 @@ def wait_until(predicate: Callable[[], bool], timeout_s: float = 3.0) -> bool:
     return poll_until(predicate, timeout_s, 0.005)
 
 
-def _mavlink_threads() -> list[threading.Thread]:
+def mavlink_threads() -> list[threading.Thread]:
+    """The dispatch threads of MAVLink links still alive."""
     return [t for t in threading.enumerate() if t.name.startswith("mavlink-")]
-
-
-@pytest.fixture
-def no_leaked_threads() -> Iterator[None]:
-    """Fails the test if a link's dispatch thread outlives it."""
-    yield
-    wait_until(lambda: not _mavlink_threads(), 3.0)
-    assert not _mavlink_threads(), f"leaked: {_mavlink_threads()}"

@@ -1,0 +1,141 @@
+"""The bridge tables of the allocator's and the vessel's files: ``[can]``, ``[mavlink]``,
+``[zenoh]`` -> :class:`~ftcap_hil.runtime.port_settings.PortSettings`.
+
+Same keys in both files except where the role differs: the allocator's ``[can]`` has
+``node_id`` (its own node) and ``esc_monitor``, the vessel's ``allocator_node_id`` (the only
+node it accepts commands from) and ``start_hub``; the allocator's ``[mavlink]`` has
+``max_wrench`` and ``wrench_limit``. ``[zenoh] config`` is a JSON5 file or the name of a
+shipped one (``allocator``, ``vessel``, ``gcs``), checked when the session opens
+(:mod:`bridges.zenoh_io.config`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from ftcap_hil.config.tables import Table
+from ftcap_hil.runtime.port_settings import (
+    CanSettings,
+    MavlinkSettings,
+    PortSettings,
+    ZenohSettings,
+)
+
+if TYPE_CHECKING:
+    from bridges.mavlink.config import MavlinkEndpoint
+
+# The bridges' pure config modules are imported when a file is read, not when ``ftcap-hil``
+# builds its parser (tests/unit/test_sim_vessel.py: the CLI imports no bridge).
+NODE_IDS = (1, 127)  # DroneCAN node IDs (0 is anonymous)
+
+
+def mavlink_endpoint_from(t: Table, default: MavlinkEndpoint) -> MavlinkEndpoint:
+    """``connection``, ``peers``, ``system_id``, ``component_id`` over ``default``."""
+    from bridges.mavlink.config import LinkConfigError, MavlinkEndpoint
+
+    try:
+        return MavlinkEndpoint(
+            t.string("connection", default.connection),
+            t.integer("system_id", default.system_id, lo=1, hi=255),
+            t.integer("component_id", default.component_id, lo=1, hi=255),
+            t.strings("peers", default.peers),
+        )
+    except LinkConfigError as e:
+        raise t.error(None, str(e)) from e
+
+
+def _mavlink(t: Table, allocator: bool) -> MavlinkSettings | None:
+    from bridges.mavlink.config import default_allocator_endpoint, default_vessel_endpoint
+
+    if not t.boolean("enabled", True):
+        t.allow("connection", "peers", "system_id", "component_id")
+        t.allow(*(("max_wrench", "wrench_limit") if allocator else ()))
+        return None
+    if not allocator:
+        return MavlinkSettings(mavlink_endpoint_from(t, default_vessel_endpoint()))
+    endpoint = mavlink_endpoint_from(t, default_allocator_endpoint())
+    mx, my, mn = t.vector("max_wrench", 3, (0.3, 0.3, 0.06), positive=True)
+    limit = t.vector("wrench_limit", 3, positive=True) if t.has("wrench_limit") else None
+    t.allow("wrench_limit")
+    triple = None if limit is None else (float(limit[0]), float(limit[1]), float(limit[2]))
+    return MavlinkSettings(endpoint, (float(mx), float(my), float(mn)), triple)
+
+
+def zenoh_config_path(t: Table, default: str) -> Path:
+    """``config``: an existing file, else the name of a shipped config (``.json5`` optional)."""
+    from bridges.zenoh_io.config import SHIPPED_CONFIGS, shipped_config_path
+
+    name = t.string("config", default)
+    if Path(name).is_file():
+        return Path(name)
+    if name.removesuffix(".json5") in SHIPPED_CONFIGS:
+        return shipped_config_path(name.removesuffix(".json5"))
+    shipped = ", ".join(SHIPPED_CONFIGS)
+    raise t.error("config", f"{name!r}: no such file, nor a shipped config ({shipped})")
+
+
+def _zenoh(t: Table, default_config: str) -> ZenohSettings | None:
+    from bridges.zenoh_io.config import ZenohConfigError, parse_override
+
+    if not t.boolean("enabled", True):
+        t.allow("vessel", "config", "connect", "overrides")
+        return None
+    path = zenoh_config_path(t, default_config)
+    overrides = list(t.strings("overrides", ()))
+    for text in overrides:
+        try:
+            parse_override(text)
+        except ZenohConfigError as e:
+            raise t.error("overrides", str(e)) from e
+    if t.has("connect"):  # the router's endpoint(s), before the explicit overrides
+        raw = t.value("connect")
+        connect = t.strings("connect") if isinstance(raw, list) else (t.string("connect"),)
+        overrides.insert(0, f"connect/endpoints:{json.dumps(list(connect))}")
+    t.allow("connect")
+    return ZenohSettings(t.string("vessel", "ftcap1"), path, tuple(overrides))
+
+
+def _can(t: Table, m: int, allocator: bool) -> CanSettings:
+    lo, hi = NODE_IDS
+    interface = t.string("interface", "canhub")
+    if allocator:
+        node = t.integer("node_id", 10, lo=lo, hi=hi)
+        ids = t.integers("esc_node_ids", m, lo=lo, hi=hi) if t.has("esc_node_ids") else None
+        t.allow("esc_node_ids")
+        extra = {"esc_monitor": t.boolean("esc_monitor", True)}
+    else:
+        node = t.integer("allocator_node_id", 10, lo=lo, hi=hi)
+        ids = t.integers("esc_node_ids", m, [20 + i for i in range(m)], lo=lo, hi=hi)
+        extra = {"start_hub": t.boolean("start_hub", False)}
+        if extra["start_hub"] and interface != "canhub":
+            raise t.error("start_hub", f"true needs interface 'canhub', got {interface!r}")
+    if ids is not None and len(set(ids)) != len(ids):
+        raise t.error("esc_node_ids", f"expected distinct node IDs, got {list(ids)}")
+    return CanSettings(
+        interface=interface,
+        channel=t.string("channel", "127.0.0.1:29536"),
+        node_id=node,
+        esc_node_ids=ids,
+        deadband_n=t.number("deadband_n", 0.0, lo=0.0),
+        **extra,
+    )
+
+
+def allocator_ports_from(root: Table, m: int) -> PortSettings:
+    """The allocator daemon's [can], [mavlink], [zenoh] (m thrusters)."""
+    return PortSettings(
+        _can(root.table("can"), m, allocator=True),
+        _mavlink(root.table("mavlink"), allocator=True),
+        _zenoh(root.table("zenoh"), "allocator.json5"),
+    )
+
+
+def vessel_ports_from(root: Table, m: int) -> PortSettings:
+    """The simulated vessel's [can], [mavlink], [zenoh] (m thrusters)."""
+    return PortSettings(
+        _can(root.table("can"), m, allocator=False),
+        _mavlink(root.table("mavlink"), allocator=False),
+        _zenoh(root.table("zenoh"), "vessel.json5"),
+    )

@@ -1,0 +1,268 @@
+"""The ground-station driver: ``ftcap-hil gcs``, the end-to-end tests and the vcan tests.
+
+A :class:`GroundStation` drives one open :class:`~bridges.mavlink.gcs.MavlinkGcsLink` (the
+caller opens and closes it):
+
+* :meth:`GroundStation.connect`: the HEARTBEATs of the vessel and the allocator, the
+  allocator past MAV_STATE_BOOT (its control loop runs), the vessel's SYS_FAILURE_EN = 1 (if
+  faults are to be injected), the allocator's FTC_MODE set (if asked) and read back, the
+  first ODOMETRY: its receive stamp is mission time 0.
+* :meth:`GroundStation.flight` -> :class:`Flight` (:meth:`Flight.run` in this thread, or
+  :meth:`Flight.start` in one of its own): every ``period_s`` on absolute deadlines
+  (:class:`~ftcap_hil.runtime.loop.DeadlineLoop`) the plan's :class:`WrenchLaw` -> one
+  WRENCH_SETPOINT; the plan's fault changes -> MAV_CMD_INJECT_FAILURE from a worker thread
+  (:mod:`~ftcap_hil.runtime.injector`: the loop never waits for an ACK); STATUSTEXTs drained
+  and logged; optionally a :class:`~ftcap_hil.report.flight.FlightRecorder` row and every
+  new FTCAP_STATUS kept.
+* :meth:`GroundStation.wind_down`: zero wrench, the vessel's faults cleared.
+
+Failures are :class:`GroundStationError` subclasses carrying the shared exit codes
+(:class:`~ftcap_hil.core.errors.ExitCode`): :class:`NoAnswer` (3) at start-up,
+:class:`LinkLost` (4) mid-flight, :class:`Refused` (5), :class:`Interrupted` (130) when a
+stop was requested before the flight began. The :class:`Mission` and :class:`GcsSettings`
+types are what ``ftcap_hil.config.mission`` builds from a mission file.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import TypeVar
+
+from bridges.mavlink.allocator_params import CODE_OF_MODE, MODE_CODES
+from bridges.mavlink.gcs import MavlinkGcsLink
+from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavResult
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.faults import Injection, injection_plan
+from ftcap_hil.core.messages import FaultKind
+from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.status import Mode
+from ftcap_hil.report.flight import FlightRecorder
+from ftcap_hil.runtime.gcs_flight import Flight, log
+from ftcap_hil.runtime.gcs_parts import (
+    FlightPlan,
+    GroundStationError,
+    InjectionOutcome,
+    Interrupted,
+    LinkLost,
+    NoAnswer,
+    Refused,
+    StatusLine,
+    WrenchLaw,
+    state_of,
+)
+
+__all__ = [
+    "Connection",
+    "Flight",
+    "FlightPlan",
+    "GcsSettings",
+    "GroundStation",
+    "GroundStationError",
+    "InjectionOutcome",
+    "Interrupted",
+    "LinkLost",
+    "Mission",
+    "NoAnswer",
+    "Refused",
+    "StatusLine",
+    "WrenchLaw",
+    "state_of",
+]
+
+T = TypeVar("T")
+
+
+# --- what a mission is (ftcap_hil.config.mission builds it from a file) ---
+
+
+@dataclass(frozen=True)
+class GcsSettings:
+    """The ``[gcs]`` table of a mission: start-up and mid-flight timeouts (s), the wrench
+    limit [X (N), Y (N), N (N*m)] demands are shrunk to, and whether the vessel's faults are
+    cleared at the end."""
+
+    connect_timeout_s: float = 20.0
+    odometry_timeout_s: float = 5.0
+    wrench_limit: tuple[float, float, float] = (1000.0, 1000.0, 1000.0)  # the allocator's
+    clear_faults_at_end: bool = True
+
+
+@dataclass(frozen=True)
+class Mission:
+    """What ``ftcap-hil gcs`` flies: the scenario's reference, fault schedule (the truth it
+    injects and records) and controller, for ``duration_s``, every ``period_s`` (T_s)."""
+
+    name: str
+    description: str
+    scenario: Scenario  # reference, faults (truth), controller; duration_s = the mission's
+    period_s: float  # control period T_s
+    mode: Mode | None  # None: fly with whatever mode the allocator is in
+    gcs: GcsSettings
+    source: str
+
+    @property
+    def duration_s(self) -> float:
+        return self.scenario.duration_s
+
+    @property
+    def injections(self) -> list[Injection]:
+        """The MAV_CMD_INJECT_FAILURE requests that reproduce the fault schedule."""
+        return injection_plan(self.scenario.faults, self.duration_s)
+
+    def with_duration(self, duration_s: float) -> Mission:
+        if not (math.isfinite(duration_s) and duration_s > 0):
+            raise ConfigError(f"duration: expected a positive number of seconds, got {duration_s}")
+        return replace(self, scenario=replace(self.scenario, duration_s=float(duration_s)))
+
+    def flight_plan(self) -> FlightPlan:
+        """Eq. (24) of the scenario toward its reference, its injections, the [gcs] limits."""
+        sc = self.scenario
+        return FlightPlan(
+            WrenchLaw.track(sc.reference_at, sc.controller),
+            self.period_s,
+            duration_s=self.duration_s,
+            injections=tuple(self.injections),
+            wrench_limit=self.gcs.wrench_limit,
+            odometry_timeout_s=self.gcs.odometry_timeout_s,
+        )
+
+
+@dataclass(frozen=True)
+class Connection:
+    """What :meth:`GroundStation.connect` found; stamps are ``time.monotonic_ns()``."""
+
+    t0_ns: int  # receive stamp of the first ODOMETRY: mission time 0
+    heartbeats_ns: int  # both HEARTBEATs heard
+    ready_ns: int  # the allocator's loop running
+    failure_enable: float | None  # SYS_FAILURE_EN as the vessel reports it (None: not set)
+    mode: str | None  # FTC_MODE read back (None: not read)
+
+
+@dataclass
+class GroundStation:
+    """The ground station on ``link`` (module docstring).
+
+    ``check`` is called while waiting and every cycle; it raises to abort (e.g. a peer
+    process died). :meth:`request_exit` is safe from a signal handler or another thread.
+    """
+
+    link: MavlinkGcsLink
+    check: Callable[[], None] | None = None
+    current: Flight | None = None
+    _stop: threading.Event = field(default_factory=threading.Event, repr=False)
+
+    def request_exit(self) -> None:
+        """Abort the start-up, or end the flight after its current cycle."""
+        self._stop.set()
+        if self.current is not None:
+            self.current.request_exit()
+
+    def _abort_if_asked(self) -> None:
+        if self._stop.is_set():
+            raise Interrupted("interrupted before the flight started")
+        if self.check is not None:
+            self.check()
+
+    def _wait(self, ready: Callable[[float], T], timeout_s: float) -> T | None:
+        """``ready(slice_s)`` until truthy (returned) or ``timeout_s`` passed (None)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self._abort_if_asked()
+            got = ready(min(0.2, max(0.0, deadline - time.monotonic())))
+            if got:
+                return got
+            if time.monotonic() >= deadline:
+                return None
+
+    def _first_odometry(self, slice_s: float) -> int:
+        end = time.monotonic() + slice_s
+        while (first := self.link.odometry.latest()) is None and time.monotonic() < end:
+            time.sleep(0.01)
+        return 0 if first is None else first.stamp_ns
+
+    def _set(
+        self, ids: tuple[int, int], who: str, name: str, value: int, timeout_s: float
+    ) -> float:
+        self._abort_if_asked()
+        got = self.link.set_param(ids, name, value, timeout_s=timeout_s)
+        if got is None:
+            raise NoAnswer(f"the {who} {ids} did not answer PARAM_SET {name} = {value}")
+        if got != value:
+            raise Refused(f"the {who} {ids} refused {name} = {value} (it reports {got:g})")
+        return got
+
+    def connect(
+        self,
+        timeout_s: float,
+        *,
+        enable_failures: bool = False,
+        mode: Mode | None = None,
+        read_mode: bool = True,
+        param_timeout_s: float = 1.0,
+    ) -> Connection:
+        """Start-up over MAVLink (module docstring); :class:`NoAnswer`, :class:`Refused`,
+        :class:`Interrupted` or whatever ``check`` raises if it cannot complete."""
+        link = self.link
+        for name, ids in (("vessel", link.vessel_ids), ("allocator", link.allocator_ids)):
+            if not self._wait(functools.partial(link.wait_heartbeat, ids), timeout_s):
+                raise NoAnswer(
+                    f"no HEARTBEAT from the {name} {ids} within {timeout_s:g} s: is it "
+                    "running, and on the expected UDP port?"
+                )
+        heartbeats_ns = time.monotonic_ns()
+        if not self._wait(lambda s: link.wait_ready(link.allocator_ids, s), timeout_s):
+            raise NoAnswer(
+                f"the allocator {link.allocator_ids} still reports MAV_STATE_BOOT after "
+                f"{timeout_s:g} s: its control loop has not started (see its log)"
+            )
+        ready_ns = time.monotonic_ns()
+        enabled = None
+        if enable_failures:
+            enabled = self._set(link.vessel_ids, "vessel", FAILURE_ENABLE_PARAM, 1, param_timeout_s)
+        if mode is not None:
+            self._set(
+                link.allocator_ids, "allocator", "FTC_MODE", CODE_OF_MODE[mode], param_timeout_s
+            )
+        mode_name = self._read_mode(min(timeout_s, 5.0)) if read_mode else None
+        t0_ns = self._wait(self._first_odometry, timeout_s)
+        if t0_ns is None:
+            raise NoAnswer(f"no ODOMETRY from the vessel within {timeout_s:g} s")
+        return Connection(t0_ns, heartbeats_ns, ready_ns, enabled, mode_name)
+
+    def _read_mode(self, timeout_s: float) -> str:
+        self._abort_if_asked()
+        params = self.link.fetch_params(self.link.allocator_ids, timeout_s=timeout_s)
+        if "FTC_MODE" not in params:
+            raise NoAnswer("the allocator did not report FTC_MODE (parameter protocol)")
+        return MODE_CODES[int(params["FTC_MODE"])].value
+
+    def flight(
+        self,
+        plan: FlightPlan,
+        t0_ns: int | None = None,
+        recorder: FlightRecorder | None = None,
+        line: StatusLine | None = None,
+    ) -> Flight:
+        """A flight of ``plan`` from ``t0_ns`` (default: now); a stop already requested
+        makes it end before its first cycle."""
+        self.current = Flight(
+            self.link, plan, t0_ns, recorder=recorder, line=line, check=self.check
+        )
+        if self._stop.is_set():
+            self.current.request_exit()
+        return self.current
+
+    def wind_down(self, clear_faults: bool) -> MavResult | None:
+        """Zero wrench; with ``clear_faults``, MAV_CMD_INJECT_FAILURE OK on every thruster
+        (its COMMAND_ACK result, None if none came)."""
+        self.link.send_wrench([0.0, 0.0, 0.0])
+        if not clear_faults:
+            return None
+        result = self.link.inject_failure(FaultKind.OK, None)
+        log.info("faults cleared on the vessel: %s", "NO_ACK" if result is None else result.name)
+        return result

@@ -13,7 +13,12 @@ In (dispatch thread -> mailboxes; invalid input is counted in the mailbox and dr
   [-1000, 1000] drops the message.
   Manual and automatic setpoints get separate mailboxes: the daemon decides who wins.
 * ``PARAM_*``: the parameter protocol on the table given to the constructor
-  (:mod:`bridges.mavlink.params`).
+  (:mod:`bridges.mavlink.params`); ``COMMAND_LONG`` / ``COMMAND_INT``: every command
+  addressed to this component is acknowledged (:mod:`bridges.mavlink.commands`; none but
+  the AUTOPILOT_VERSION request is supported: UNSUPPORTED).
+* Setpoints, parameters and commands are obeyed only from authorized systems
+  (``MavlinkEndpoint.authorized_systems``, default the ground station 255); others are
+  counted in ``stats.unauthorized`` (and a command gets DENIED).
 
 Out (called from the loop thread; each returns False instead of raising on transport errors):
 
@@ -23,11 +28,16 @@ Out (called from the loop thread; each returns False instead of raising on trans
   runs, and a ground station must not take the heartbeat alone for "allocating". The daemon
   reports ``STANDBY`` (setpoint stale: zero thrust) or ``ACTIVE`` (allocating) from its
   first cycle on.
-* :meth:`send_thruster_commands` -> ``ACTUATOR_OUTPUT_STATUS``: ``actuator[i]`` = u_i in N
-  (0-based vessel-file order), bit i of ``active`` set for i < n_thrusters, rest zero.
+* :meth:`send_thruster_commands` -> ``ACTUATOR_OUTPUT_STATUS`` with the normalised outputs
+  ``actuator[i]`` = u_i / u_max_i clipped to [-1, 1] (0-based vessel-file order, bit i of
+  ``active`` set for i < n_thrusters; not sent when ``u_max`` is not configured), and
+  ``FTCAP_THRUST`` with u in N.
 * :meth:`send_status` -> ``FTCAP_STATUS`` (our dialect): tau demand / unallocated and the
-  per-thruster ``delta_hat`` and ``f_hat`` (N) of one cycle, the :class:`StatusFlag` bits
-  and per-thruster faulty / saturated / probing masks (MAVLink 2 extension fields).
+  per-thruster ``delta_hat`` (with ``delta_hat_std``) and ``f_hat`` (N) of one cycle, the
+  :class:`StatusFlag` bits and per-thruster faulty / saturated / probing masks (MAVLink 2
+  extension fields).
+* :meth:`send_esc_status` -> ``FTCAP_ESC_STATUS`` and the standard ``ESC_STATUS`` (every
+  call) and ``ESC_INFO`` (at most once a second), four ESCs per message.
 * :meth:`send_statustext` -> ``STATUSTEXT``, for the daemon to call on transitions.
 """
 
@@ -48,14 +58,17 @@ from bridges.mavlink.codec import (
     padded,
     status_flags,
 )
+from bridges.mavlink.commands import CommandService
 from bridges.mavlink.config import (
     VESSEL_IDS,
     LinkConfigError,
     MavlinkEndpoint,
     default_allocator_endpoint,
 )
+from bridges.mavlink.esc import EscInfoClock, send_standard_esc
 from bridges.mavlink.link import MavlinkPort, PortOwner, Route
 from bridges.mavlink.params import ParamServer, ParamService, ParamSpec
+from bridges.mavlink.peers import TrafficLimits
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import Odometry, ThrusterCommand, WrenchSetpoint
 from ftcap_hil.core.status import AllocatorStatus
@@ -84,12 +97,15 @@ class AllocatorLinkConfig:
         (default 10 x max_wrench: a sanity bound, not the vessel's capability, since the
         allocator itself reports what it cannot meet).
     telemetry_source: (system, component) ODOMETRY is accepted from; None accepts any.
+    u_max: per-thruster force (N) that an ACTUATOR_OUTPUT_STATUS output of 1 stands for
+        (the vessel file's u_max); None: ACTUATOR_OUTPUT_STATUS is not sent.
     """
 
     n_thrusters: int
     max_wrench: tuple[float, float, float]
     wrench_limit: tuple[float, float, float] | None = None
     telemetry_source: tuple[int, int] | None = VESSEL_IDS
+    u_max: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.n_thrusters, int) or not 1 <= self.n_thrusters <= MAX_THRUSTERS:
@@ -101,6 +117,13 @@ class AllocatorLinkConfig:
         if limit is None:
             limit = [10.0 * w for w in self.max_wrench]
         object.__setattr__(self, "wrench_limit", _positive_triple("wrench_limit", limit))
+        if self.u_max is not None:
+            arr = np.asarray(self.u_max, dtype=np.float64)
+            if arr.shape != (self.n_thrusters,) or not np.all(np.isfinite(arr) & (arr > 0)):
+                raise LinkConfigError(
+                    f"u_max: expected {self.n_thrusters} positive forces (N), got {self.u_max!r}"
+                )
+            object.__setattr__(self, "u_max", tuple(arr.tolist()))
 
 
 def wrench_from_manual(msg: Any, max_wrench: Sequence[float]) -> WrenchSetpoint:
@@ -139,6 +162,7 @@ class MavlinkAllocatorLink(PortOwner):
         *,
         poll_s: float = 0.05,
         heartbeat_period_s: float = 1.0,
+        limits: TrafficLimits | None = None,
     ) -> None:
         self.config = config
         self.odometry: Mailbox[Odometry] = Mailbox("mavlink.odometry")
@@ -146,11 +170,14 @@ class MavlinkAllocatorLink(PortOwner):
         self.manual: Mailbox[WrenchSetpoint] = Mailbox("mavlink.manual_control")
         self.params = ParamServer(param_specs)
         self._param_service = ParamService(self.params)
+        self.commands = CommandService()
+        self._esc_info = EscInfoClock()
         routes = {
             "ODOMETRY": Route(self._on_odometry, self.odometry),
             "WRENCH_SETPOINT": Route(self._on_wrench, self.setpoint),
             "MANUAL_CONTROL": Route(self._on_manual, self.manual),
             **self._param_service.routes(),
+            **self.commands.routes(),
         }
         self._port = MavlinkPort(
             endpoint or default_allocator_endpoint(),
@@ -160,8 +187,10 @@ class MavlinkAllocatorLink(PortOwner):
             status=SystemStatus.BOOT,
             heartbeat_period_s=heartbeat_period_s,
             poll_s=poll_s,
+            limits=limits,
         )
         self._param_service.attach(self._port)
+        self.commands.attach(self._port)
         self._active_mask = (1 << config.n_thrusters) - 1
 
     # --- dispatch thread ---
@@ -176,25 +205,38 @@ class MavlinkAllocatorLink(PortOwner):
     def _on_wrench(self, msg: Any, now_ns: int) -> None:
         if not self._port.accepts(msg.target_system, msg.target_component):
             return
+        if not self._port.authorized(msg):
+            return
         assert self.config.wrench_limit is not None  # filled in by __post_init__
         self.setpoint.put(wrench_from_setpoint(msg, self.config.wrench_limit))
 
     def _on_manual(self, msg: Any, now_ns: int) -> None:
         if not self._port.accepts(msg.target):
             return
+        if not self._port.authorized(msg):
+            return
         self.manual.put(wrench_from_manual(msg, self.config.max_wrench))
 
     # --- loop thread ---
 
     def send_thruster_commands(self, command: ThrusterCommand) -> bool:
-        """ACTUATOR_OUTPUT_STATUS with u (N) in actuator[0:m]."""
+        """FTCAP_THRUST with u (N) and ACTUATOR_OUTPUT_STATUS with u / u_max in [-1, 1]."""
         u = np.asarray(command.u, dtype=np.float64)
-        if u.shape != (self.config.n_thrusters,):
-            raise ValueError(f"thruster command: expected shape ({self.config.n_thrusters},)")
-        actuator = padded(u, 32, "actuator")
+        n = self.config.n_thrusters
+        if u.shape != (n,):
+            raise ValueError(f"thruster command: expected shape ({n},)")
+        t_ms = self._port.time_boot_ms()
+        newtons = padded(u, MAX_THRUSTERS, "u")
+        ok = self._port.send(lambda mav: mav.ftcap_thrust_send(t_ms, newtons, n))
+        if self.config.u_max is None:
+            return ok
+        outputs = padded(np.clip(u / np.asarray(self.config.u_max), -1.0, 1.0), 32, "actuator")
         stamp = self._port.time_boot_us()
         mask = self._active_mask
-        return self._port.send(lambda mav: mav.actuator_output_status_send(stamp, mask, actuator))
+        return (
+            self._port.send(lambda mav: mav.actuator_output_status_send(stamp, mask, outputs))
+            and ok
+        )
 
     def send_status(self, status: AllocatorStatus) -> bool:
         """FTCAP_STATUS for one cycle (the daemon decimates); fields as in the dialect."""
@@ -212,6 +254,7 @@ class MavlinkAllocatorLink(PortOwner):
             bitmask(tuple(a or b for a, b in zip_longest(status.faulty, status.esc_failed))),
             bitmask(status.saturated),
             bitmask(status.probing),
+            padded(status.delta_std[:n], MAX_THRUSTERS, "delta_hat_std"),
         )
         return self._port.send(lambda mav: mav.ftcap_status_send(*fields))
 
@@ -233,7 +276,9 @@ class MavlinkAllocatorLink(PortOwner):
             mask,
             n,
         )
-        return self._port.send(lambda mav: mav.ftcap_esc_status_send(*fields))
+        ok = self._port.send(lambda mav: mav.ftcap_esc_status_send(*fields))
+        standard = send_standard_esc(self._port, rpm, current, age, failed, n, self._esc_info)
+        return standard and ok
 
     def set_system_status(self, status: SystemStatus) -> None:
         """MAV_STATE reported by the HEARTBEAT from now on (a change is sent at once)."""

@@ -129,8 +129,9 @@ def bits(mask: int, n: int) -> tuple[bool, ...]:
 def status_from_message(msg: Any) -> AllocatorStatus:
     """FTCAP_STATUS -> AllocatorStatus (fields it does not carry keep their defaults).
 
-    A sender without the extension fields (masks read as 0) gives per-thruster ``faulty``
-    from FAULT_DETECTED alone: every thruster is then marked when any is. Raises
+    A sender without the extension fields (masks read as 0, ``delta_hat_std`` as zeros)
+    gives per-thruster ``faulty`` from FAULT_DETECTED alone: every thruster is then marked
+    when any is. ``delta_std`` may hold NaN (unknown). Raises
     MalformedMessage for n_thrusters > 16 or non-finite values.
     """
     n = int(msg.n_thrusters)
@@ -145,11 +146,14 @@ def status_from_message(msg: Any) -> AllocatorStatus:
     if StatusFlag.FAULT_DETECTED in flags and not any(faulty):
         faulty = (True,) * n
     tau, unallocated, delta_hat, f_hat = (tuple(a.tolist()) for a in arrays)
+    std = getattr(msg, "delta_hat_std", None)
+    delta_std = () if std is None else tuple(float(v) for v in std[:n])
     return AllocatorStatus(
         degraded=StatusFlag.DEGRADED in flags,
         setpoint_stale=StatusFlag.SETPOINT_STALE in flags,
         telemetry_stale=StatusFlag.TELEMETRY_STALE in flags,
         delta_hat=delta_hat,
+        delta_std=delta_std,
         f_hat=f_hat,
         tau_demand=tau,
         unallocated=unallocated,

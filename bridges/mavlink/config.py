@@ -15,17 +15,29 @@ Topology (defaults, all on 127.0.0.1; every address and id comes from config)::
      +--------------------------------+            +--------------------------------+
      | allocator MavlinkAllocatorLink |<-ODOMETRY--| vessel       MavlinkVesselLink |
      | sys 1 comp 191  binds :14570   |            | sys 1 comp 1    binds :14560   |
-     | peers: 14550                   |            | peers: 14570, 14550            |
+     | peers: 14550, relay: 14560     |            | peers: 14570, 14550            |
      +--------------------------------+            +--------------------------------+
 
-Each process binds one UDP "inbox" on 127.0.0.1 (pymavlink ``udpin``) and sends from that
-same socket to the inboxes of its configured peers. The peers are registered with pymavlink
-before the first receive, so a link can send before it has heard from anyone (a plain
-``udpin`` cannot) and start order does not matter; replies come back to the sender's inbox.
-Anyone else who sends to an inbox (e.g. MAVProxy) is added as a peer by pymavlink and gets
-the same traffic. Every message goes to every peer; receivers filter on target and source
-ids, as MAVLink routing does. The vessel and the allocator share system id 1 (one vessel,
-two components); MAV_COMP_ID_ONBOARD_COMPUTER (191) is the allocator.
+Each process binds one UDP "inbox" on 127.0.0.1 and sends from that same socket to the
+inboxes of its configured peers, so a link can send before it has heard from anyone and
+start order does not matter; replies come back to the sender's inbox. Every message goes to
+every peer; receivers filter on target and source ids, as MAVLink routing does. The vessel
+and the allocator share system id 1 (one vessel, two components);
+MAV_COMP_ID_ONBOARD_COMPUTER (191) is the allocator.
+
+Anyone else who sends to an inbox (MAVProxy, QGroundControl, MAVSDK) becomes a peer only
+once it has sent an accepted frame (MAVLink 2, signed when ``key_file`` is set, from one of
+``authorized_systems``), for as long as it keeps talking (:mod:`bridges.mavlink.peers`).
+The allocator also fronts the vessel (``relay``): what such a learnt peer sends that is not
+for the allocator alone goes on to the vessel's inbox, and what the vessel sends to the
+allocator goes on to the learnt peers, so that one ground-station link to the allocator's
+inbox (``mavproxy.py --master=udpout:127.0.0.1:14570``) reaches both components.
+
+Security (per endpoint, all off or loopback by default): ``key_file`` turns on MAVLink 2
+signing (:mod:`bridges.mavlink.signing`): unsigned frames are then refused; MAVLink 1
+frames are always refused; ``authorized_systems`` lists the system ids whose setpoints,
+parameter requests and commands are obeyed (default: the ground station, 255); a bind on
+all interfaces (0.0.0.0, ::) is refused unless ``bind_all_interfaces`` is true.
 
 Protocol: MAVLink 2 only, with the ftcap dialect (common.xml + WRENCH_SETPOINT,
 FTCAP_STATUS) from :mod:`bridges.mavlink.dialect`, set explicitly on every connection.
@@ -33,6 +45,7 @@ FTCAP_STATUS) from :mod:`bridges.mavlink.dialect`, set explicitly on every conne
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ftcap_hil.core.errors import ConfigError
@@ -58,19 +71,52 @@ def parse_host_port(key: str, value: str) -> tuple[str, int]:
     return host, int(port)
 
 
+_ALL_INTERFACES = {"", "0.0.0.0", "::", "[::]", "*"}
+_BINDING = ("udpin:", "udp:", "tcpin:")
+
+
+def _ids(key: str, values: object) -> tuple[int, ...]:
+    if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
+        raise LinkConfigError(f"{key}: expected a list of system ids in 1..255, got {values!r}")
+    for v in values:
+        if not isinstance(v, int) or isinstance(v, bool) or not 1 <= v <= 255:
+            raise LinkConfigError(f"{key}: expected system ids in 1..255, got {v!r}")
+    return tuple(values)
+
+
+def bind_host(connection: str) -> str | None:
+    """The host a binding connection (``udpin:``, ``udp:``, ``tcpin:``) binds, else None."""
+    if not connection.startswith(_BINDING):
+        return None
+    rest = connection.split(":", 1)[1]
+    host = rest.rpartition(":")[0]
+    return host
+
+
 @dataclass(frozen=True)
 class MavlinkEndpoint:
-    """Where one link binds, whom it sends to, and who it is on the MAVLink network.
+    """Where one link binds, whom it sends to, who it is, and whom it trusts.
 
-    ``connection`` is a pymavlink connection string. With ``udpin:HOST:PORT`` (the default
-    topology) ``peers`` lists the ``host:port`` inboxes to send to from the start; any other
-    pymavlink transport (``udpout:``, ``tcp:``, a serial device) must leave ``peers`` empty.
+    ``connection`` is a pymavlink-style connection string: ``udpin:HOST:PORT`` (the default
+    topology: bind HOST:PORT, send to ``peers``), ``udpout:HOST:PORT`` (send to HOST:PORT
+    from an ephemeral port) or another pymavlink transport (``tcp:``, a serial device), which
+    must leave ``peers`` and ``relay`` empty. ``peers`` and ``relay`` are ``host:port``
+    inboxes (module docstring). ``key_file``: MAVLink 2 signing passphrase file (None: no
+    signing). ``authorized_systems``: system ids obeyed (None: the link's default).
+    ``bind_all_interfaces`` must be true for a bind on 0.0.0.0 or ::. ``geodetic_origin``:
+    ``(lat_deg, lon_deg[, alt_m])`` of the NED origin, for the vessel's GLOBAL_POSITION_INT
+    (:mod:`bridges.mavlink.geodesy`; other links ignore it).
     """
 
     connection: str
     system_id: int
     component_id: int
     peers: tuple[str, ...] = ()  # (the [mavlink] table is read by ftcap_hil.config.bridges)
+    relay: tuple[str, ...] = ()
+    key_file: str | None = None
+    authorized_systems: tuple[int, ...] | None = None
+    bind_all_interfaces: bool = False
+    geodetic_origin: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         for key, value in (("system_id", self.system_id), ("component_id", self.component_id)):
@@ -80,20 +126,52 @@ class MavlinkEndpoint:
             raise LinkConfigError(
                 f"connection: expected a pymavlink string, got {self.connection!r}"
             )
-        if self.peers and not self.connection.startswith(("udpin:", "udp:")):
+        for key in ("peers", "relay"):
+            values = getattr(self, key)
+            if values and not self.connection.startswith(("udpin:", "udp:")):
+                raise LinkConfigError(
+                    f"{key}: only a 'udpin:' connection can have {key}, connection is "
+                    f"{self.connection!r}"
+                )
+            for peer in values:
+                parse_host_port(key, peer)
+        if self.authorized_systems is not None:
+            _ids("authorized_systems", self.authorized_systems)
+        if self.key_file is not None and (not isinstance(self.key_file, str) or not self.key_file):
+            raise LinkConfigError(f"key_file: expected a file name, got {self.key_file!r}")
+        if not isinstance(self.bind_all_interfaces, bool):
             raise LinkConfigError(
-                f"peers: only a 'udpin:' connection can have peers, connection is "
-                f"{self.connection!r}"
+                f"bind_all_interfaces: expected true or false, got {self.bind_all_interfaces!r}"
             )
-        for peer in self.peers:
-            parse_host_port("peers", peer)
+        if self.geodetic_origin is not None:
+            from bridges.mavlink.geodesy import GeodeticOrigin  # it imports LinkConfigError
+
+            GeodeticOrigin.from_value(self.geodetic_origin)
+        if bind_host(self.connection) in _ALL_INTERFACES and not self.bind_all_interfaces:
+            raise LinkConfigError(
+                f"connection: {self.connection!r} listens on all interfaces; bind a single "
+                "address (127.0.0.1) or set bind_all_interfaces = true"
+            )
 
     @classmethod
     def inbox(
-        cls, port: int, ids: tuple[int, int], peers: tuple[int, ...] = (), host: str = LOCALHOST
+        cls,
+        port: int,
+        ids: tuple[int, int],
+        peers: tuple[int, ...] = (),
+        host: str = LOCALHOST,
+        *,
+        relay: tuple[int, ...] = (),
     ) -> MavlinkEndpoint:
-        """Endpoint binding ``host:port`` and sending to ``host:p`` for each p in ``peers``."""
-        return cls(f"udpin:{host}:{port}", ids[0], ids[1], tuple(f"{host}:{p}" for p in peers))
+        """Endpoint binding ``host:port`` and sending to ``host:p`` for each p in ``peers``
+        (and relaying to ``host:p`` for each p in ``relay``)."""
+        return cls(
+            f"udpin:{host}:{port}",
+            ids[0],
+            ids[1],
+            tuple(f"{host}:{p}" for p in peers),
+            tuple(f"{host}:{p}" for p in relay),
+        )
 
 
 def default_gcs_endpoint() -> MavlinkEndpoint:
@@ -102,8 +180,8 @@ def default_gcs_endpoint() -> MavlinkEndpoint:
 
 
 def default_allocator_endpoint() -> MavlinkEndpoint:
-    """The allocator's inbox, sending to the ground station."""
-    return MavlinkEndpoint.inbox(ALLOCATOR_PORT, ALLOCATOR_IDS, (GCS_PORT,))
+    """The allocator's inbox, sending to the ground station and fronting the vessel."""
+    return MavlinkEndpoint.inbox(ALLOCATOR_PORT, ALLOCATOR_IDS, (GCS_PORT,), relay=(VESSEL_PORT,))
 
 
 def default_vessel_endpoint() -> MavlinkEndpoint:

@@ -4,14 +4,18 @@ injects faults and sets parameters.
 In (dispatch thread; sources filtered by ``vessel_ids`` / ``allocator_ids``):
 
 * ``ODOMETRY`` (vessel) -> ``odometry: Mailbox[Odometry]``
-* ``ACTUATOR_OUTPUT_STATUS`` (allocator) -> ``thruster_commands: Mailbox[ThrusterCommand]``
-  (the first ``active.bit_length()`` actuator values, N)
+* ``FTCAP_THRUST`` (allocator) -> ``thruster_commands: Mailbox[ThrusterCommand]``
+  (the first ``n_thrusters`` forces, N; ACTUATOR_OUTPUT_STATUS carries them normalised)
 * ``FTCAP_STATUS`` (allocator) -> ``allocator_status: Mailbox[AllocatorStatus]``
 * ``FTCAP_ESC_STATUS`` (allocator) -> ``esc_status: Mailbox[EscReport]`` (rpm, current, age
   per thruster as the allocator sees its ESCs; NaN = unknown, inf age = never heard)
 * ``HEARTBEAT`` (anyone) -> :meth:`heartbeat`; ``STATUSTEXT`` (anyone, chunks reassembled)
   -> ``statustexts`` queue; ``PARAM_VALUE`` -> :meth:`params_of`; ``COMMAND_ACK`` -> the
-  waiting :meth:`inject_failure`.
+  waiting :meth:`inject_failure` / :meth:`command`.
+
+Only the vehicle's systems (those of ``allocator_ids`` and ``vessel_ids``) are listened to.
+Integer parameters are decoded byte-wise, as the components advertise
+(:mod:`bridges.mavlink.params`), and set the same way.
 
 Out: :meth:`send_wrench` (WRENCH_SETPOINT), :meth:`send_manual` (MANUAL_CONTROL),
 :meth:`inject_failure` (COMMAND_LONG MAV_CMD_INJECT_FAILURE, waits for COMMAND_ACK),
@@ -36,13 +40,15 @@ from bridges.mavlink.codec import (
     odometry_from_message,
     status_from_message,
 )
+from bridges.mavlink.commands import MavResult
 from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint, default_gcs_endpoint
 from bridges.mavlink.link import MavlinkPort, PortOwner, Route
+from bridges.mavlink.params import int_from_wire, int_to_wire
+from bridges.mavlink.peers import TrafficLimits
 from bridges.mavlink.vessel import (
     FAILURE_TYPE_OF,
     FAILURE_UNIT_SYSTEM_MOTOR,
     MAV_CMD_INJECT_FAILURE,
-    MavResult,
 )
 from ftcap_hil.core.messages import FaultKind, Odometry, ThrusterCommand, WrenchSetpoint
 from ftcap_hil.core.status import AllocatorStatus
@@ -50,6 +56,7 @@ from ftcap_hil.ports.mailbox import Mailbox, Stamped
 
 Ids = tuple[int, int]
 _MAV_PARAM_TYPE_REAL32 = 9
+_MAV_PARAM_TYPE_INT32 = 6
 _STARTING = (SystemStatus.UNINIT, SystemStatus.BOOT)
 
 
@@ -93,6 +100,7 @@ class MavlinkGcsLink(PortOwner):
         vessel_ids: Ids = VESSEL_IDS,
         poll_s: float = 0.05,
         heartbeat_period_s: float = 1.0,
+        limits: TrafficLimits | None = None,
     ) -> None:
         self.allocator_ids = allocator_ids
         self.vessel_ids = vessel_ids
@@ -109,7 +117,7 @@ class MavlinkGcsLink(PortOwner):
         self._command_lock = threading.Lock()
         routes = {
             "ODOMETRY": Route(self._on_odometry, self.odometry),
-            "ACTUATOR_OUTPUT_STATUS": Route(self._on_actuators, self.thruster_commands),
+            "FTCAP_THRUST": Route(self._on_thrust, self.thruster_commands),
             "FTCAP_STATUS": Route(self._on_status, self.allocator_status),
             "FTCAP_ESC_STATUS": Route(self._on_esc, self.esc_status),
             "HEARTBEAT": Route(self._on_heartbeat),
@@ -122,8 +130,10 @@ class MavlinkGcsLink(PortOwner):
             role="gcs",
             mav_type="MAV_TYPE_GCS",
             routes=routes,
+            default_authorized=(allocator_ids[0], vessel_ids[0]),
             heartbeat_period_s=heartbeat_period_s,
             poll_s=poll_s,
+            limits=limits,
         )
 
     # --- dispatch thread ---
@@ -142,10 +152,10 @@ class MavlinkGcsLink(PortOwner):
         if self._from(msg, self.vessel_ids):
             self.odometry.put(odometry_from_message(msg, self._port.dialect))
 
-    def _on_actuators(self, msg: Any, now_ns: int) -> None:
+    def _on_thrust(self, msg: Any, now_ns: int) -> None:
         if self._from(msg, self.allocator_ids):
-            m = int(msg.active).bit_length()
-            self.thruster_commands.put(ThrusterCommand.checked(msg.actuator[:m]))
+            n = int(msg.n_thrusters)
+            self.thruster_commands.put(ThrusterCommand.checked(msg.u[:n]))
 
     def _on_status(self, msg: Any, now_ns: int) -> None:
         if self._from(msg, self.allocator_ids):
@@ -183,7 +193,10 @@ class MavlinkGcsLink(PortOwner):
             self._port.stats.ignored += 1
 
     def _on_param_value(self, msg: Any, now_ns: int) -> None:
-        entry = (float(msg.param_value), msg.param_type, msg.param_index, msg.param_count)
+        value = float(msg.param_value)
+        if msg.param_type == _MAV_PARAM_TYPE_INT32:
+            value = float(int_from_wire(value))
+        entry = (value, msg.param_type, msg.param_index, msg.param_count)
         with self._cond:
             self._params.setdefault(self._src(msg), {})[msg.param_id] = entry
             self._cond.notify_all()
@@ -304,9 +317,14 @@ class MavlinkGcsLink(PortOwner):
         with self._cond:
             known = self._params.get(ids, {}).pop(name, None)
         ptype = known[1] if known is not None else _MAV_PARAM_TYPE_REAL32
+        wire = value
+        if ptype == _MAV_PARAM_TYPE_INT32:
+            if not float(value).is_integer():
+                raise ValueError(f"{name} is an integer parameter, got {value!r}")
+            wire = int_to_wire(int(value))
         raw = name.encode("ascii")
         for _ in range(attempts):
-            self._port.send(lambda mav: mav.param_set_send(ids[0], ids[1], raw, value, ptype))
+            self._port.send(lambda mav: mav.param_set_send(ids[0], ids[1], raw, wire, ptype))
             with self._cond:
                 if self._cond.wait_for(lambda: name in self._params.get(ids, {}), timeout_s):
                     return self._params[ids][name][0]

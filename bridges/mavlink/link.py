@@ -1,16 +1,20 @@
 """MAVLink transport shared by the allocator, vessel and ground-station links (pymavlink).
 
 This is the only module that imports ``pymavlink.mavutil`` (the dialect generator in
-:mod:`bridges.mavlink.dialect` imports ``pymavlink.generator``). One :class:`MavlinkPort`
-wraps one pymavlink connection and one dispatch thread; the role adapters
+:mod:`bridges.mavlink.dialect` imports ``pymavlink.generator``), and only for byte streams
+(``tcp:``, serial): UDP goes through a socket of our own (:mod:`bridges.mavlink.transport`),
+so that the port, not pymavlink, decides who is a peer. One :class:`MavlinkPort` owns one
+transport, one dispatch thread and a send lock; the role adapters
 (:mod:`bridges.mavlink.allocator`, :mod:`bridges.mavlink.vessel`, :mod:`bridges.mavlink.gcs`)
-give it a table of handlers and only validate and drop values into mailboxes. The topology
-and ids are in :mod:`bridges.mavlink.config`.
+give it a table of handlers and only validate and drop values into mailboxes. Every
+datagram passes :class:`~bridges.mavlink.gate.InboxGate` (rate limits, MAVLink 2 only,
+signing, system ids, peer admission, relaying) before a handler sees it. The topology, ids
+and security settings are in :mod:`bridges.mavlink.config`.
 
 Protocol: MAVLink 2 only, with the ftcap dialect (common.xml + WRENCH_SETPOINT,
-FTCAP_STATUS) from :mod:`bridges.mavlink.dialect`, set explicitly on every connection rather
-than through mavutil's process-wide dialect. UDP is read one datagram at a time and the
-parser is reset between datagrams (a MAVLink frame never spans two).
+FTCAP_STATUS) from :mod:`bridges.mavlink.dialect`, set explicitly on every connection
+rather than through mavutil's process-wide dialect. With a key file every frame sent is
+signed (:mod:`bridges.mavlink.signing`).
 """
 
 from __future__ import annotations
@@ -18,7 +22,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import socket
 import struct
 import threading
 import time
@@ -32,7 +35,11 @@ from pymavlink import mavutil  # noqa: E402  (must follow the MAVLINK20 switch)
 
 from bridges.mavlink import dialect as mavlink_dialect  # noqa: E402
 from bridges.mavlink.codec import Severity, SystemStatus  # noqa: E402
-from bridges.mavlink.config import LinkConfigError, MavlinkEndpoint, parse_host_port  # noqa: E402
+from bridges.mavlink.config import GCS_IDS, LinkConfigError, MavlinkEndpoint  # noqa: E402
+from bridges.mavlink.gate import InboxGate, PortStats  # noqa: E402
+from bridges.mavlink.peers import Address, PeerTable, TrafficLimits  # noqa: E402
+from bridges.mavlink.signing import SignatureVerifier, load_signing_key, signing_timestamp  # noqa: E402
+from bridges.mavlink.transport import StreamTransport, UdpTransport  # noqa: E402
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.ports.mailbox import Mailbox
 
@@ -42,18 +49,6 @@ Handler = Callable[[Any, int], None]
 """Called on the dispatch thread with (message, receive stamp from time.monotonic_ns())."""
 
 _DECODE_ERRORS = (MalformedMessage, ValueError, TypeError, OverflowError, AttributeError)
-
-
-@dataclass
-class PortStats:
-    """Counters of one port; written by the dispatch thread (send_errors by any sender)."""
-
-    received: int = 0
-    bad_data: int = 0  # CRC errors, unknown ids, garbage bytes
-    malformed: int = 0  # decoded but invalid, for handlers without a mailbox
-    ignored: int = 0  # addressed to someone else or from an unexpected source
-    send_errors: int = 0
-    errors: int = 0  # unexpected exceptions in handlers (logged)
 
 
 @dataclass(frozen=True)
@@ -75,11 +70,12 @@ class _Heartbeat:
 
 
 class MavlinkPort:
-    """One pymavlink connection, one dispatch thread, a send lock and a 1 Hz HEARTBEAT.
+    """One transport, one dispatch thread, a send lock and a 1 Hz HEARTBEAT.
 
     The thread starts in the constructor: build the handler table first. ``mav_type`` and
     ``autopilot`` are MAV_TYPE_* / MAV_AUTOPILOT_* names for the HEARTBEAT. ``tick``
     (optional) runs on the dispatch thread after every receive or poll timeout.
+    ``default_authorized``: the system ids obeyed when the endpoint names none.
     """
 
     def __init__(
@@ -94,15 +90,21 @@ class MavlinkPort:
         heartbeat_period_s: float = 1.0,
         poll_s: float = 0.05,
         tick: Callable[[int], None] | None = None,
+        default_authorized: tuple[int, ...] = (GCS_IDS[0],),
+        limits: TrafficLimits | None = None,
     ) -> None:
         self.endpoint = endpoint
         self.role = role
         self.dialect = mavlink_dialect.load()
         self.stats = PortStats()
+        self.authorized_systems = frozenset(endpoint.authorized_systems or default_authorized)
+        key = None if endpoint.key_file is None else load_signing_key(endpoint.key_file)
         self._routes = dict(routes)
         self._poll_s = poll_s
         self._tick = tick
         self._t0_ns = time.monotonic_ns()
+        self._next_expiry_ns = 0
+        self._requester: Address | None = None
         self._heartbeat = _Heartbeat(
             getattr(self.dialect, mav_type),
             getattr(self.dialect, autopilot),
@@ -113,12 +115,24 @@ class MavlinkPort:
         self._stop = threading.Event()
         self._closed = False
         self._close_lock = threading.Lock()
-        self._conn = self._open(endpoint)
-        self._datagram = isinstance(self._conn, mavutil.mavudp)
+        self._transport = self._open(endpoint, limits)
+        self._mav = self._sender(key)
+        self._gate = InboxGate(
+            self.dialect,
+            self._transport,
+            (endpoint.system_id, endpoint.component_id),
+            self.authorized_systems,
+            None if key is None else SignatureVerifier(key),
+            self.stats,
+            datagrams=isinstance(self._transport, UdpTransport),
+        )
         self._thread = threading.Thread(target=self._run, name=f"mavlink-{role}", daemon=True)
         self._thread.start()
 
-    def _open(self, endpoint: MavlinkEndpoint) -> Any:
+    @staticmethod
+    def _open(endpoint: MavlinkEndpoint, limits: TrafficLimits | None) -> Any:
+        if endpoint.connection.startswith(("udpin:", "udp:", "udpout:")):
+            return UdpTransport(endpoint.connection, endpoint.peers, endpoint.relay, limits)
         try:
             conn = mavutil.mavlink_connection(
                 endpoint.connection,
@@ -127,23 +141,27 @@ class MavlinkPort:
             )
         except (OSError, ValueError) as e:
             raise LinkConfigError(f"connection: cannot open {endpoint.connection!r}: {e}") from e
-        # The dialect is set here, per connection, rather than through mavutil's global.
-        conn.mav = self.dialect.MAVLink(
-            conn, srcSystem=endpoint.system_id, srcComponent=endpoint.component_id
+        return StreamTransport(conn)
+
+    def _sender(self, key: bytes | None) -> Any:
+        mav = self.dialect.MAVLink(
+            self._transport, srcSystem=self.system_id, srcComponent=self.component_id
         )
-        conn.mav.robust_parsing = True
-        conn.WIRE_PROTOCOL_VERSION = "2.0"
-        conn.first_byte = False  # never let mavutil switch protocol version behind our back
-        if endpoint.peers:
-            if not isinstance(getattr(conn, "clients", None), set):
-                conn.close()
-                raise LinkConfigError("peers: this pymavlink has no multi-client udpin")
-            for peer in endpoint.peers:
-                host, port = parse_host_port("peers", peer)
-                addr = (socket.gethostbyname(host), port)
-                conn.clients.add(addr)
-                conn.clients_last_alive[addr] = time.time()
-        return conn
+        if key is not None:
+            mav.signing.secret_key = key
+            mav.signing.sign_outgoing = True
+            mav.signing.timestamp = signing_timestamp(time.time())
+        return mav
+
+    @property
+    def table(self) -> PeerTable:
+        """Who this port trusts and sends to (:mod:`bridges.mavlink.peers`)."""
+        return self._transport.table
+
+    @property
+    def signing(self) -> bool:
+        """Frames are signed and unsigned ones refused (a key file is set)."""
+        return self.endpoint.key_file is not None
 
     # --- identity and time ---
 
@@ -183,20 +201,25 @@ class MavlinkPort:
     def send(self, build: Callable[[Any], None]) -> bool:
         """Call ``build(mav)`` (e.g. ``lambda mav: mav.heartbeat_send(...)``) under the lock.
 
-        Returns False, counted in ``stats.send_errors``, if the port is closed or the socket
-        refused the datagram; never raises for transport errors.
+        The frame goes to every peer of the current snapshot. Returns False, counted in
+        ``stats.send_errors``, if the port is closed, the value does not fit the wire type,
+        or a peer's datagram was refused; never raises for transport errors.
         """
         with self._send_lock:
             if self._closed:
                 self.stats.send_errors += 1
                 return False
+            refused = self._transport.send_errors
             try:
-                build(self._conn.mav)
+                build(self._mav)
             except (OSError, OverflowError, ValueError, struct.error) as e:
                 # OverflowError / struct.error: a value that does not fit the wire type
                 # (e.g. 1e39 into a float32 field): the message is not sent, the caller goes on.
                 self.stats.send_errors += 1
                 logger.debug("%s: send failed: %s", self.role, e)
+                return False
+            if self._transport.send_errors != refused:  # some peer's socket refused it
+                self.stats.send_errors += 1
                 return False
         return True
 
@@ -235,31 +258,28 @@ class MavlinkPort:
             ok = self.send(build) and ok
         return ok
 
-    # --- dispatch thread ---
+    def authorized(self, msg: Any) -> bool:
+        """The sender's system id is one this port obeys; counts ``stats.unauthorized`` if
+        not (handlers of setpoints, parameters and commands call this)."""
+        if msg.get_srcSystem() in self.authorized_systems:
+            return True
+        self.stats.unauthorized += 1
+        return False
 
-    def _receive(self) -> list[Any]:
-        """Messages decoded from one datagram (UDP), or at most one message (streams)."""
-        if not self._datagram:
-            msg = self._conn.recv_msg()
-            return [] if msg is None else [msg]
-        data = self._conn.recv()
-        if not data:
-            return []
-        msgs = self._conn.mav.parse_buffer(data) or []
-        mav = self._conn.mav
-        if mav.buf_len() > 0:
-            # A MAVLink frame never spans datagrams: drop the incomplete tail, or a bogus
-            # length field in garbage would swallow the next, valid datagram.
-            self.stats.bad_data += 1
-            mav.buf, mav.buf_index = bytearray(), 0
-            mav.expected_length = self.dialect.HEADER_LEN_V1 + 2  # as in MAVLink.__init__
-        return msgs
+    def reply(self, build: Callable[[Any], None], cost: float = 1.0) -> bool:
+        """:meth:`send` an answer, paid from the requester's reply budget (dispatch thread,
+        inside a handler): a source that floods requests cannot make the port flood."""
+        if not self.table.take_reply(self._requester, time.monotonic_ns(), cost):
+            return False
+        return self.send(build)
+
+    # --- dispatch thread ---
 
     def _run(self) -> None:
         self._periodic(time.monotonic_ns())  # announce ourselves at once
         while not self._stop.is_set():
             try:
-                msgs = self._receive()
+                item = self._transport.receive(self._poll_s)
             except OSError as e:
                 if self._stop.is_set():
                     break
@@ -268,10 +288,12 @@ class MavlinkPort:
                 self._stop.wait(self._poll_s)
                 continue
             now_ns = time.monotonic_ns()
-            if not msgs:
-                self._conn.select(self._poll_s)
-            for msg in msgs:
-                self._dispatch(msg, now_ns)
+            if item is not None:
+                data, addr = item
+                self._requester = addr
+                for msg in self._gate.process(data, addr, now_ns):
+                    self._dispatch(msg, now_ns)
+                self._requester = None
             self._periodic(now_ns)
 
     def _periodic(self, now_ns: int) -> None:
@@ -279,17 +301,14 @@ class MavlinkPort:
         if now_ns >= hb.next_ns:
             hb.next_ns = now_ns + int(hb.period_s * 1e9)
             self.send_heartbeat()
+        if now_ns >= self._next_expiry_ns:
+            self._next_expiry_ns = now_ns + 1_000_000_000
+            self.table.expire(now_ns)
         if self._tick is not None:
             self._tick(now_ns)
 
     def _dispatch(self, msg: Any, now_ns: int) -> None:
         mtype = msg.get_type()
-        if mtype == "BAD_DATA":
-            self.stats.bad_data += 1
-            return
-        self.stats.received += 1
-        if (msg.get_srcSystem(), msg.get_srcComponent()) == (self.system_id, self.component_id):
-            return  # our own traffic echoed back by a forwarder
         route = self._routes.get(mtype)
         if route is None:
             return
@@ -323,7 +342,7 @@ class MavlinkPort:
             if not self._closed:
                 self._closed = True
                 with contextlib.suppress(OSError):
-                    self._conn.close()
+                    self._transport.close()
 
     def __enter__(self) -> MavlinkPort:
         return self

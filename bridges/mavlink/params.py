@@ -9,10 +9,22 @@ answers the MAVLink parameter protocol on a :class:`~bridges.mavlink.link.Mavlin
 * ``PARAM_SET`` -> ``PARAM_VALUE`` with the new value, or, if refused, with the unchanged
   value plus a ``STATUSTEXT`` (WARNING) that says why.
 
-Unknown names or indices get no answer (as the protocol says) and are counted in
-``PortStats.ignored``. Integer parameters travel as ``MAV_PARAM_TYPE_INT32`` with the value
-C-cast to float (the ArduPilot / MAVProxy convention, exact up to 2**24), not bytewise.
-Names are upper case, at most 16 characters (MAVLink's ``param_id``), as MAVProxy expects.
+Only authorized systems (:meth:`MavlinkPort.authorized`) are answered; the answers are paid
+from the requester's reply budget. Unknown names or indices get no answer (as the protocol
+says) and are counted in ``PortStats.ignored``.
+
+Encoding: integer parameters travel as ``MAV_PARAM_TYPE_INT32`` **byte-wise** (the int32's
+four bytes in the float field), which is what every client assumes of a vehicle that does
+not say it is ArduPilot (QGroundControl, MAVSDK), and what the components advertise in
+AUTOPILOT_VERSION (``MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE``). A ``PARAM_SET`` of an
+integer parameter is also understood when the client C-casts the value (MAVProxy, which
+assumes ArduPilot's convention): for a parameter whose limits lie within +-2**24, the two
+readings never overlap (a C-cast integer >= 1 has float bits above 2**29; a byte-wise one is
+0 or a denormal), so the one within the limits is the one meant. Names are upper case, at
+most 16 characters (MAVLink's ``param_id``).
+
+Limits are compared in float32, the wire's precision: 0.99 sent as float32 is
+0.99000001, which is "0.99" to the sender, so it is taken as the limit itself.
 
 Validators run on the dispatch thread: they must be quick and pure (check the value, return
 ``None`` to accept or a short reason to refuse); the loop thread reads values with
@@ -24,6 +36,7 @@ from __future__ import annotations
 import enum
 import math
 import re
+import struct
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -35,6 +48,24 @@ from bridges.mavlink.link import MavlinkPort, Route
 
 _NAME = re.compile(r"^[A-Z][A-Z0-9_]{0,15}$")
 _INT_LIMIT = 2.0**24  # integers above this are not exact as float32
+
+
+def float32(value: float) -> float:
+    """``value`` rounded to the nearest float32 (what it becomes on the wire)."""
+    try:
+        return float(struct.unpack("<f", struct.pack("<f", value))[0])
+    except OverflowError:
+        return math.copysign(math.inf, value)
+
+
+def int_to_wire(value: int) -> float:
+    """An int32 parameter value as the float whose bytes it is (byte-wise encoding)."""
+    return float(struct.unpack("<f", struct.pack("<i", value))[0])
+
+
+def int_from_wire(raw: float) -> int:
+    """The int32 whose bytes a byte-wise-encoded float carries."""
+    return int(struct.unpack("<i", struct.pack("<f", raw))[0])
 
 
 class ParamType(enum.Enum):
@@ -145,11 +176,20 @@ class ParamServer:
             return spec.validate(value)
         return None
 
+    @staticmethod
+    def _snapped(spec: ParamSpec, value: float) -> float:
+        """A float value within float32 rounding of a limit is that limit (module docstring)."""
+        if spec.kind is ParamType.FLOAT and math.isfinite(value):
+            for bound in (spec.min, spec.max):
+                if math.isfinite(bound) and float32(value) == float32(bound):
+                    return bound
+        return value
+
     def set(self, name: str, value: float) -> SetResult:
         """Apply the rules and store ``value`` if accepted. KeyError for unknown names."""
         index = self._index[name]
         spec = self._specs[index]
-        value = float(value)
+        value = self._snapped(spec, float(value))
         reason = self._refusal(spec, value)
         with self._lock:
             if reason is not None:
@@ -157,6 +197,17 @@ class ParamServer:
             self._values[index] = value
             self.generation += 1
         return SetResult(True, value)
+
+
+def decode_set_value(spec: ParamSpec, raw: float) -> float:
+    """The value a PARAM_SET means for ``spec``: float parameters as sent; integer ones
+    byte-wise, or C-cast if that is the reading within the limits (module docstring)."""
+    if spec.kind is not ParamType.INT:
+        return float(raw)
+    bytewise = float(int_from_wire(raw))
+    if max(spec.min, -_INT_LIMIT) <= bytewise <= min(spec.max, _INT_LIMIT):
+        return bytewise
+    return float(raw)
 
 
 class ParamService:
@@ -178,24 +229,36 @@ class ParamService:
         """The port that answers go out on (before it, requests are ignored)."""
         self._port = port
 
-    def _send_value(self, index: int) -> None:
+    def wire_value(self, index: int) -> tuple[float, int]:
+        """(param_value, MAV_PARAM_TYPE) of parameter ``index`` as it goes on the wire."""
+        assert self._port is not None
+        dialect = self._port.dialect
+        spec = self.server.specs[index]
+        value = self.server.get_index(index)
+        if spec.kind is ParamType.INT:
+            return int_to_wire(int(value)), dialect.MAV_PARAM_TYPE_INT32
+        return value, dialect.MAV_PARAM_TYPE_REAL32
+
+    def _send_value(self, index: int, *, reply: bool = True) -> None:
         port = self._port
         if port is None:
             return
-        spec = self.server.specs[index]
-        value = self.server.get_index(index)
-        ptype = (
-            port.dialect.MAV_PARAM_TYPE_INT32
-            if spec.kind is ParamType.INT
-            else port.dialect.MAV_PARAM_TYPE_REAL32
-        )
-        name = spec.name.encode("ascii")
+        value, ptype = self.wire_value(index)
+        name = self.server.specs[index].name.encode("ascii")
         count = len(self.server)
-        port.send(lambda mav: mav.param_value_send(name, value, ptype, count, index))
+
+        def build(mav: Any) -> None:
+            mav.param_value_send(name, value, ptype, count, index)
+
+        port.reply(build) if reply else port.send(build)
 
     def _for_me(self, msg: Any) -> bool:
         port = self._port
-        return port is not None and port.accepts(msg.target_system, msg.target_component)
+        return (
+            port is not None
+            and port.accepts(msg.target_system, msg.target_component)
+            and port.authorized(msg)
+        )
 
     def _on_request_list(self, msg: Any, now_ns: int) -> None:
         if self._for_me(msg):
@@ -222,7 +285,8 @@ class ParamService:
         if index is None:
             self._port.stats.ignored += 1
             return
-        result = self.server.set(msg.param_id, msg.param_value)
+        value = decode_set_value(self.server.specs[index], float(msg.param_value))
+        result = self.server.set(msg.param_id, value)
         if not result.accepted:
             self._port.send_statustext(f"{msg.param_id} not set: {result.reason}", Severity.WARNING)
-        self._send_value(index)
+        self._send_value(index, reply=False)  # the outcome of a set always goes out

@@ -1,9 +1,10 @@
 """The allocator's status on MAVLink: a status sink for the daemon's loop.
 
 Each :meth:`MavlinkStatusSink.publish` (decimated by the daemon) sends HEARTBEAT state
-(STANDBY while the setpoint is stale, ACTIVE while allocating), ACTUATOR_OUTPUT_STATUS (u in
-N), FTCAP_ESC_STATUS (when ESC telemetry is monitored) and FTCAP_STATUS; announcements go out
-as STATUSTEXT with the matching MAV_SEVERITY.
+(STANDBY while the setpoint is stale, ACTIVE while allocating), FTCAP_THRUST (u in N) and
+ACTUATOR_OUTPUT_STATUS (u / u_max), FTCAP_ESC_STATUS with ESC_STATUS / ESC_INFO (when ESC
+telemetry is monitored) and FTCAP_STATUS; announcements go out as STATUSTEXT with the
+matching MAV_SEVERITY.
 """
 
 from __future__ import annotations

@@ -197,6 +197,7 @@ def allocator_argv(p: Ports) -> list[str]:
         f"can.channel={LOCALHOST}:{p.can}",
         f"mavlink.connection=udpin:{LOCALHOST}:{p.allocator}",
         f'mavlink.peers=["{LOCALHOST}:{p.gcs}"]',
+        f'mavlink.relay=["{LOCALHOST}:{p.vessel}"]',  # a ground station on one link sees both
         f"zenoh.overrides={zenoh_listen}",
     ]
     return _cli("allocator", *[a for s in sets for a in ("--set", s)])

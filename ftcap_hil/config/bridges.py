@@ -31,16 +31,34 @@ if TYPE_CHECKING:
 NODE_IDS = (1, 127)  # DroneCAN node IDs (0 is anonymous)
 
 
+ENDPOINT_KEYS = (
+    "connection", "peers", "system_id", "component_id", "relay", "key_file",
+    "authorized_systems", "bind_all_interfaces", "geodetic_origin",
+)  # fmt: skip
+
+
 def mavlink_endpoint_from(t: Table, default: MavlinkEndpoint) -> MavlinkEndpoint:
-    """``connection``, ``peers``, ``system_id``, ``component_id`` over ``default``."""
+    """``connection``, ``peers``, ``system_id``, ``component_id``, ``relay``, ``key_file``,
+    ``authorized_systems``, ``bind_all_interfaces``, ``geodetic_origin`` over ``default``."""
     from bridges.mavlink.config import LinkConfigError, MavlinkEndpoint
 
+    authorized = default.authorized_systems
+    if t.has("authorized_systems"):
+        authorized = t.integers("authorized_systems", lo=1, hi=255)
+    origin = default.geodetic_origin
+    if t.has("geodetic_origin"):
+        origin = tuple(float(v) for v in t.vector("geodetic_origin"))
     try:
         return MavlinkEndpoint(
             t.string("connection", default.connection),
             t.integer("system_id", default.system_id, lo=1, hi=255),
             t.integer("component_id", default.component_id, lo=1, hi=255),
             t.strings("peers", default.peers),
+            relay=t.strings("relay", default.relay),
+            key_file=t.string("key_file", default.key_file),
+            authorized_systems=authorized,
+            bind_all_interfaces=t.boolean("bind_all_interfaces", default.bind_all_interfaces),
+            geodetic_origin=origin,
         )
     except LinkConfigError as e:
         raise t.error(None, str(e)) from e
@@ -50,7 +68,7 @@ def _mavlink(t: Table, allocator: bool) -> MavlinkSettings | None:
     from bridges.mavlink.config import default_allocator_endpoint, default_vessel_endpoint
 
     if not t.boolean("enabled", True):
-        t.allow("connection", "peers", "system_id", "component_id")
+        t.allow(*ENDPOINT_KEYS)
         t.allow(*(("max_wrench", "wrench_limit") if allocator else ()))
         return None
     if not allocator:

@@ -92,7 +92,12 @@ def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Por
     d = cfg.daemon
     link = stack.enter_context(
         mav.MavlinkAllocatorLink(
-            mav.AllocatorLinkConfig(d.thrusters.m, mav_cfg.max_wrench, mav_cfg.wrench_limit),
+            mav.AllocatorLinkConfig(
+                d.thrusters.m,
+                mav_cfg.max_wrench,
+                mav_cfg.wrench_limit,
+                u_max=tuple(float(v) for v in d.thrusters.u_max),
+            ),
             mav_cfg.endpoint,
             allocator_param_specs(
                 d.core,

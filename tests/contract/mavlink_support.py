@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable
@@ -81,6 +82,13 @@ class RawPeer:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def param_number(msg: Any) -> float:
+    """A PARAM_VALUE's value as the components encode it: INT32 byte-wise, REAL32 as is."""
+    if msg.param_type == DIALECT.MAV_PARAM_TYPE_INT32:
+        return float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
+    return float(msg.param_value)
 
 
 def send_datagram(port: int, payload: bytes) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Iterator
 
 import numpy as np
@@ -18,6 +19,7 @@ from tests.contract.mavlink_support import (
     DIALECT,
     RawPeer,
     free_udp_ports,
+    param_number,
     send_datagram,
     wait_until,
 )
@@ -178,8 +180,8 @@ def test_odometry_in_wrong_frame_or_bad_quaternion_or_wrong_source_is_dropped(pa
         vessel.mav.odometry_send(1, ned, ned, *args, nan21, nan21)
         bad_q = (0.0, 0.0, 0.0, [0.5, 0, 0, 0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         vessel.mav.odometry_send(1, ned, frd, *bad_q, nan21, nan21)
-        other.mav.odometry_send(1, ned, frd, *args, nan21, nan21)
-        assert wait_until(lambda: link.odometry.malformed == 3 and link.stats.ignored >= 1)
+        other.mav.odometry_send(1, ned, frd, *args, nan21, nan21)  # system 7: refused at once
+        assert wait_until(lambda: link.odometry.malformed == 3 and link.stats.unknown_system >= 1)
     assert link.odometry.latest() is None
 
 
@@ -190,14 +192,15 @@ def _param_values(gcs: RawPeer, since: int) -> dict[str, tuple[float, int, int, 
     }
 
 
-def test_param_request_list_answers_every_param(pair) -> None:
+def test_param_request_list_answers_every_param_integers_bytewise(pair) -> None:
     _, gcs, _ = pair
     gcs.mav.param_request_list_send(SYS, COMP)
     assert gcs.wait_for("PARAM_VALUE", lambda m: m.param_index == 2)
+    as_float = lambda i: struct.unpack("<f", struct.pack("<i", i))[0]  # noqa: E731
     assert _param_values(gcs, 0) == {
         "ALLOC_W_U": (1.0, DIALECT.MAV_PARAM_TYPE_REAL32, 0, 3),
-        "ALLOC_HORIZON": (4.0, DIALECT.MAV_PARAM_TYPE_INT32, 1, 3),
-        "ALLOC_EVEN": (2.0, DIALECT.MAV_PARAM_TYPE_INT32, 2, 3),
+        "ALLOC_HORIZON": (as_float(4), DIALECT.MAV_PARAM_TYPE_INT32, 1, 3),
+        "ALLOC_EVEN": (as_float(2), DIALECT.MAV_PARAM_TYPE_INT32, 2, 3),
     }
 
 
@@ -243,18 +246,37 @@ def test_param_set_refused_echoes_unchanged_value_and_says_why(
     gcs.mav.param_set_send(SYS, COMP, name.encode(), value, ptype)
     echo = gcs.wait_for("PARAM_VALUE", lambda m: m.param_id == name)
     text = gcs.wait_for("STATUSTEXT", lambda m: m.text.startswith(name))
-    assert echo.param_value == before
+    assert param_number(echo) == before
     assert link.params.get(name) == before
     assert reason in text.text
     assert text.severity == DIALECT.MAV_SEVERITY_WARNING
 
 
+def test_thruster_commands_go_out_normalised_and_in_newtons() -> None:
+    link_port, gcs_port = free_udp_ports(2)
+    endpoint = MavlinkEndpoint.inbox(link_port, ALLOCATOR_IDS, (gcs_port,))
+    config = AllocatorLinkConfig(4, MAX_WRENCH, u_max=(2.0, 4.0, 1.0, 4.0))
+    with (
+        RawPeer(f"udpin:127.0.0.1:{gcs_port}") as gcs,
+        MavlinkAllocatorLink(config, endpoint) as link,
+    ):
+        assert link.send_thruster_commands(ThrusterCommand.checked([1.0, -2.0, 0.0, 4.5]))
+        out = gcs.wait_for("ACTUATOR_OUTPUT_STATUS")
+        thrust = gcs.wait_for("FTCAP_THRUST")
+    assert out.active == 0b1111
+    assert out.actuator[:5] == [0.5, -0.5, 0.0, 1.0, 0.0]  # u / u_max, clipped to [-1, 1]
+    assert thrust.n_thrusters == 4
+    assert thrust.u[:5] == [1.0, -2.0, 0.0, 4.5, 0.0]
+    with pytest.raises(LinkConfigError, match="u_max"):
+        AllocatorLinkConfig(4, MAX_WRENCH, u_max=(1.0, 1.0))
+
+
 def test_thruster_commands_and_status_go_out(pair) -> None:
     link, gcs, _ = pair
     assert link.send_thruster_commands(ThrusterCommand.checked([1.0, -2.0, 0.0, 4.5]))
-    out = gcs.wait_for("ACTUATOR_OUTPUT_STATUS")
-    assert out.active == 0b1111
-    assert out.actuator[:5] == [1.0, -2.0, 0.0, 4.5, 0.0]
+    assert gcs.wait_for("FTCAP_THRUST").u[:4] == [1.0, -2.0, 0.0, 4.5]
+    gcs.pump(0.1)
+    assert not gcs.of_type("ACTUATOR_OUTPUT_STATUS")  # u_max not configured: not sent
     status = AllocatorStatus(
         tau_demand=(10.0, 0.0, 5.0),
         unallocated=(0.0, 0.0, 1.5),
@@ -263,6 +285,7 @@ def test_thruster_commands_and_status_go_out(pair) -> None:
         faulty=(False, True, True, False),
         saturated=(False, False, False, True),
         probing=(False, True, False, False),
+        delta_std=(0.0, 0.25, 0.125, math.nan),
     )
     assert link.send_status(status)
     msg = gcs.wait_for("FTCAP_STATUS")
@@ -271,6 +294,7 @@ def test_thruster_commands_and_status_go_out(pair) -> None:
     np.testing.assert_allclose(decoded.delta_hat, status.delta_hat)
     np.testing.assert_allclose(decoded.f_hat, status.f_hat)
     np.testing.assert_allclose(decoded.unallocated, status.unallocated)
+    np.testing.assert_equal(decoded.delta_std, status.delta_std)  # NaN (unknown) survives
     assert (decoded.faulty, decoded.saturated, decoded.probing) == (
         status.faulty,
         status.saturated,

@@ -1,14 +1,20 @@
-"""Interop: MAVProxy, standing in for the ground station on its inbox port, lists and sets the
-allocator's parameters and injects a failure into the vessel.
+"""Interop: MAVProxy lists and sets the allocator's and the vessel's parameters and injects
+failures into the vessel, in the two ways the README gives:
 
-MAVProxy runs headless (no display, loopback only) as
-``mavproxy.py --master udp:127.0.0.1:PORT --default-modules=param,cmdlong,misc --no-state``
-with commands on stdin; ``udp:`` makes it bind PORT, which both links list as a peer.
-Skipped when MAVProxy is not installed (``pip install MAVProxy``).
+* standing in for the ground station on its inbox port (``--master=udp:127.0.0.1:14550``,
+  which both links list as a peer), and
+* as an extra ground station with one link to the allocator's inbox only
+  (``--master=udpout:127.0.0.1:14570``, the README's line, also the Docker one): MAVProxy
+  sends on that one link, and the allocator relays what is for the vessel, and back;
+  with MAVLink 2 signing too (``signing key PASSPHRASE``).
+
+MAVProxy runs headless (no display, loopback only) with ``--default-modules=param,cmdlong,
+misc --no-state`` and commands on stdin. Skipped when MAVProxy is not installed.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import queue
 import re
@@ -39,12 +45,14 @@ pytestmark = [
 class MavproxySession:
     """MAVProxy as a child process, driven through stdin, its stdout read by one thread."""
 
-    def __init__(self, port: int, target: tuple[int, int], cwd: Path) -> None:
+    def __init__(
+        self, master: str, target: tuple[int, int], cwd: Path, modules: str = "param,cmdlong,misc"
+    ) -> None:
         env = {**os.environ, "HOME": str(cwd), "PYTHONUNBUFFERED": "1"}
         self.proc = subprocess.Popen(
             [
-                sys.executable, str(MAVPROXY), f"--master=udp:127.0.0.1:{port}",
-                "--default-modules=param,cmdlong,misc", "--no-state", "--mav20",
+                sys.executable, str(MAVPROXY), f"--master={master}",
+                f"--default-modules={modules}", "--no-state", "--mav20",
                 f"--target-system={target[0]}", f"--target-component={target[1]}",
             ],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
@@ -106,7 +114,7 @@ def system(tmp_path) -> Iterator[tuple[MavproxySession, MavlinkAllocatorLink, Ma
         MavlinkAllocatorLink(config, allocator_ep, params) as allocator,
         MavlinkVesselLink(4, vessel_ep) as vessel,
     ):
-        session = MavproxySession(gcs_port, ALLOCATOR_IDS, tmp_path)
+        session = MavproxySession(f"udp:127.0.0.1:{gcs_port}", ALLOCATOR_IDS, tmp_path)
         try:
             yield session, allocator, vessel
         finally:
@@ -144,3 +152,76 @@ def test_mavproxy_sets_allocator_params_and_injects_a_vessel_failure(system) -> 
     mavproxy.expect(r"INJECT_FAILURE: ACCEPTED")
     faults = [s.value for s in vessel.drain_faults()]
     assert faults == [FaultInjection(i, FaultKind.WEAK, 0.5) for i in range(4)]
+
+
+def _through_the_allocator(
+    tmp_path: Path, key_file: Path | None = None
+) -> Iterator[tuple[MavproxySession, MavlinkAllocatorLink, MavlinkVesselLink]]:
+    gcs_port, allocator_port, vessel_port = free_udp_ports(3)  # nobody listens on gcs_port
+    key = None if key_file is None else str(key_file)
+    config = AllocatorLinkConfig(n_thrusters=4, max_wrench=(100.0, 50.0, 200.0))
+    allocator_ep = MavlinkEndpoint(
+        f"udpin:127.0.0.1:{allocator_port}", *ALLOCATOR_IDS, (f"127.0.0.1:{gcs_port}",),
+        relay=(f"127.0.0.1:{vessel_port}",), key_file=key,
+    )  # fmt: skip
+    vessel_ep = MavlinkEndpoint(
+        f"udpin:127.0.0.1:{vessel_port}", *VESSEL_IDS,
+        (f"127.0.0.1:{allocator_port}", f"127.0.0.1:{gcs_port}"), key_file=key,
+    )  # fmt: skip
+    params = [ParamSpec("ALLOC_HORIZON", 4, ParamType.INT, 1, 50)]
+    with (
+        MavlinkAllocatorLink(config, allocator_ep, params) as allocator,
+        MavlinkVesselLink(4, vessel_ep) as vessel,
+    ):
+        modules = "param,cmdlong,misc" + (",signing" if key_file else "")
+        master = f"udpout:127.0.0.1:{allocator_port}"
+        session = MavproxySession(master, ALLOCATOR_IDS, tmp_path, modules)
+        try:
+            yield session, allocator, vessel
+        finally:
+            session.close()
+
+
+@pytest.fixture
+def relayed(tmp_path) -> Iterator[tuple[MavproxySession, MavlinkAllocatorLink, MavlinkVesselLink]]:
+    yield from _through_the_allocator(tmp_path)
+
+
+def _drive_both_components(
+    mavproxy: MavproxySession, allocator: MavlinkAllocatorLink, vessel: MavlinkVesselLink
+) -> None:
+    mavproxy.expect(r"Detected vehicle 1:191", timeout_s=30)
+    mavproxy.command("param fetch")
+    mavproxy.expect(r"Received 1 parameters")
+    mavproxy.command("param set ALLOC_HORIZON 12")  # C-cast by MAVProxy, understood
+    assert wait_until(lambda: allocator.params.get("ALLOC_HORIZON") == 12)
+    mavproxy.command("set target_component 1")  # the vessel, behind the allocator's inbox
+    mavproxy.command("param fetch")
+    mavproxy.expect(r"Received 1 parameters")
+    mavproxy.command(f"param set {FAILURE_ENABLE_PARAM} 1")
+    assert wait_until(lambda: vessel.fault_injection_enabled)
+    mavproxy.command("long INJECT_FAILURE 101 4 2")  # WRONG on thruster 2, param4 left 0
+    mavproxy.expect(r"INJECT_FAILURE: ACCEPTED")
+    (fault,) = [s.value for s in vessel.drain_faults()]
+    assert (fault.index, fault.kind) == (1, FaultKind.BIAS)
+    assert math.isnan(fault.value)  # 0 means the simulator's default bias, not 0 N
+    mavproxy.command("long DO_SET_SERVO 1 1500")  # unsupported: acknowledged all the same
+    mavproxy.expect(r"DO_SET_SERVO: UNSUPPORTED")
+
+
+def test_mavproxy_with_one_link_to_the_allocator_reaches_the_vessel_too(relayed) -> None:
+    mavproxy, allocator, vessel = relayed
+    _drive_both_components(mavproxy, allocator, vessel)
+    assert allocator.stats.relayed > 0
+    assert len(allocator._port.table.dynamic_peers()) == 1  # noqa: SLF001  (MAVProxy)
+
+
+def test_mavproxy_signed_through_the_allocator(tmp_path) -> None:
+    key_file = tmp_path / "mavlink.key"
+    key_file.write_text("ftcap-interop-passphrase\n")
+    key_file.chmod(0o600)
+    for mavproxy, allocator, vessel in _through_the_allocator(tmp_path, key_file):
+        mavproxy.command("signing key ftcap-interop-passphrase")
+        _drive_both_components(mavproxy, allocator, vessel)
+        assert allocator.stats.bad_signature == vessel.stats.bad_signature == 0
+        assert vessel.stats.unsigned == 0  # what the allocator relayed was signed

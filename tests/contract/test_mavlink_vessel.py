@@ -25,6 +25,7 @@ from tests.contract.mavlink_support import (
     DIALECT,
     RawPeer,
     free_udp_ports,
+    param_number,
 )
 
 pytestmark = [pytest.mark.timeout(30), pytest.mark.usefixtures("no_leaked_threads")]
@@ -95,8 +96,8 @@ def _inject(gcs: RawPeer, ftype: int, instance: float, value: float = NAN, comma
 
 
 def _enable(gcs: RawPeer) -> None:
-    gcs.mav.param_set_send(SYS, COMP, FAILURE_ENABLE_PARAM.encode(), 1, 6)
-    assert gcs.wait_for("PARAM_VALUE", lambda m: m.param_value == 1.0)
+    gcs.mav.param_set_send(SYS, COMP, FAILURE_ENABLE_PARAM.encode(), 1, 6)  # C-cast 1: accepted
+    assert gcs.wait_for("PARAM_VALUE", lambda m: param_number(m) == 1.0)
 
 
 def test_heartbeat_identifies_a_surface_vessel(pair) -> None:

@@ -238,7 +238,13 @@ def test_the_router_image_is_the_locked_zenoh_release() -> None:
 # ---------------------------------------------------------------- the same demo as `ftcap-hil demo`
 
 
-TOPOLOGY_KEYS = ("can.", "mavlink.connection=", "mavlink.peers=", "zenoh.")
+TOPOLOGY_KEYS = (
+    "can.",
+    "mavlink.connection=",
+    "mavlink.peers=",
+    "mavlink.bind_all_interfaces=",
+    "zenoh.",
+)
 
 
 def _behaviour(argv: list[str]) -> tuple[str, list[str], list[str]]:

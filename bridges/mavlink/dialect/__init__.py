@@ -4,27 +4,37 @@ Messages (ids 52800-52809 are reserved for this project; see ``ftcap.xml``):
 
 * ``WRENCH_SETPOINT`` (52800): ground station -> allocator, body-frame wrench in N / N*m.
 * ``FTCAP_STATUS`` (52801): allocator -> ground station, demanded and unallocated wrench plus
-  the per-thruster fault estimate ``delta_hat`` / ``f_hat`` of one cycle, up to 16 thrusters.
-  A typed message of our own rather than DEBUG_FLOAT_ARRAY / NAMED_VALUE_FLOAT: the two
-  estimates of one cycle arrive together (atomically), with names and units, in one packet.
+  the per-thruster fault estimate ``delta_hat`` (with its standard deviation) / ``f_hat`` of
+  one cycle, up to 16 thrusters. A typed message of our own rather than DEBUG_FLOAT_ARRAY /
+  NAMED_VALUE_FLOAT: the estimates of one cycle arrive together (atomically), with names and
+  units, in one packet.
+* ``FTCAP_ESC_STATUS`` (52802): the ESC telemetry as the allocator sees it.
+* ``FTCAP_THRUST`` (52803): the commanded thruster forces in N.
 
-How the Python module is produced and shipped
----------------------------------------------
+How the Python module is produced and where it is imported from
+----------------------------------------------------------------
 Only the XML is in the repository. :func:`load` runs pymavlink's own mavgen (Python 3,
-MAVLink 2) on first use and caches the module under ``$FTCAP_MAVLINK_CACHE`` or
-``$XDG_CACHE_HOME/ftcap-hil/mavlink`` (default ``~/.cache/ftcap-hil/mavlink``), in a file
-named after a hash of the XML, the included XML and the pymavlink version, so an upgrade
-regenerates it (why it is not committed: docs/decisions.md). Concurrent first starts (daemon,
-vessel and ground station launched together) each write a private temporary file and
-``os.replace`` it, so they never see a partial file.
+MAVLink 2) on first use and caches the module in :func:`cache_dir`
+(``$FTCAP_MAVLINK_CACHE``, else ``$XDG_CACHE_HOME/ftcap-hil/mavlink``, else
+``~/.cache/ftcap-hil/mavlink``), in a file named after a hash of the XML, the included XML
+and the pymavlink version, so an upgrade regenerates it. The cache is code that gets
+imported, so it must be private: a directory this process creates is made with mode 0700; an
+existing directory (and the module file in it) is used only if it is a real directory (not a
+symlink) owned by this user or by root and not writable by group or others (root-owned and
+read-only: an image built at install time). Otherwise, or when the cache cannot be written
+(a read-only home), the module is generated into a fresh ``tempfile.mkdtemp`` directory
+(random name, mode 0700) for this process only: never a predictable shared path.
+Concurrent first starts write a private temporary file each and ``os.replace`` it.
 
 pymavlink wheels do not ship ``message_definitions/``; they ship each bundled dialect's XML
 next to its module in ``pymavlink/dialects/v20/`` (common.xml -> standard.xml ->
 minimal.xml). mavgen resolves ``<include>`` relative to the including file, so the three are
 copied next to our XML in a scratch directory.
 
-To decode our messages in another tool (e.g. MAVProxy ``--dialect ftcap``), write the module
-with ``python -m bridges.mavlink.dialect --out DIR`` and put it where that tool looks.
+For pymavlink's tools, ``python -m bridges.mavlink.dialect --install`` writes the module as
+``pymavlink/dialects/v20/ftcap.py`` of the installed pymavlink, where ``mavutil.set_dialect``
+(MAVProxy ``--dialect=ftcap``, ``mavlogdump.py --dialect ftcap``, ``MAVLINK_DIALECT=ftcap``)
+imports it from (:mod:`bridges.mavlink.dialect.__main__`).
 """
 
 from __future__ import annotations
@@ -34,21 +44,27 @@ import hashlib
 import importlib.metadata
 import importlib.util
 import io
+import logging
 import os
+import re
 import shutil
+import stat
 import sys
 import tempfile
 import threading
 from pathlib import Path
 from types import ModuleType
 
-__all__ = ["XML", "MESSAGE_IDS", "cache_dir", "load", "render"]
+__all__ = ["XML", "MESSAGE_IDS", "cache_dir", "load", "render", "install", "is_private", "share"]
 
 XML = Path(__file__).resolve().parent / "ftcap.xml"
 MESSAGE_IDS = range(52800, 52810)
+STANDARD_IDS = {290: "ESC_INFO", 291: "ESC_STATUS"}  # common.xml's, missing from pymavlink's
 _INCLUDES = ("common.xml", "standard.xml", "minimal.xml")
 _MODULE_NAME = "bridges.mavlink.dialect.ftcap"
 _lock = threading.Lock()
+_scratch: list[Path] = []  # per-process fallback directories (mkdtemp), reused by this process
+logger = logging.getLogger(__name__)
 
 
 def pymavlink_definitions_dir() -> Path:
@@ -75,6 +91,44 @@ def cache_dir() -> Path:
     return Path(base) / "ftcap-hil" / "mavlink"
 
 
+def is_private(path: Path, *, directory: bool) -> bool:
+    """``path`` is safe to import code from: not a symlink, the expected kind, owned by this
+    user or root, and not writable by group or others."""
+    try:
+        st = path.lstat()
+    except OSError:
+        return False
+    kind_ok = stat.S_ISDIR(st.st_mode) if directory else stat.S_ISREG(st.st_mode)
+    owner_ok = st.st_uid in (os.getuid(), 0)
+    return kind_ok and owner_ok and not st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+
+
+def _private_dir(path: Path) -> Path | None:
+    """``path`` as a private directory, created with mode 0700 if missing; None if it exists
+    but is not private, or cannot be created."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.mkdir(mode=0o700)
+    except FileExistsError:
+        pass
+    except OSError:
+        return None
+    if is_private(path, directory=True):
+        return path
+    logger.warning("MAVLink dialect cache %s is not private (owner or mode): not used", path)
+    return None
+
+
+def _without_bundled(text: str) -> str:
+    """Our XML less the standard messages the bundled common.xml already defines."""
+    common = (pymavlink_definitions_dir() / "common.xml").read_text(encoding="utf-8")
+    for msg_id, name in STANDARD_IDS.items():
+        if f'name="{name}"' in common:
+            block = re.compile(rf'\s*<message id="{msg_id}" name="{name}">.*?</message>', re.S)
+            text = block.sub("", text)
+    return text
+
+
 def render(xml: Path = XML) -> str:
     """Run mavgen on ``xml`` (with the bundled common.xml) and return the module's source."""
     from pymavlink.generator import mavgen, mavparse
@@ -83,7 +137,8 @@ def render(xml: Path = XML) -> str:
         work = Path(tmp)
         for name in _INCLUDES:
             shutil.copyfile(pymavlink_definitions_dir() / name, work / name)
-        shutil.copyfile(xml, work / "ftcap.xml")
+        text = _without_bundled(xml.read_text(encoding="utf-8"))
+        (work / "ftcap.xml").write_text(text, encoding="utf-8")
         out = work / "ftcap.py"
         opts = mavgen.Opts(
             str(out), wire_protocol=mavparse.PROTOCOL_2_0, language="Python3", validate=True
@@ -99,13 +154,13 @@ def render(xml: Path = XML) -> str:
         return out.read_text(encoding="utf-8")
 
 
-def _write_atomically(target: Path, source: str) -> None:
-    target.parent.mkdir(parents=True, exist_ok=True)
+def write_atomically(target: Path, source: str, mode: int = 0o600) -> None:
+    """Write ``source`` to ``target`` through a private temporary file and ``os.replace``."""
     fd, tmp_name = tempfile.mkstemp(dir=target.parent, prefix=".ftcap-", suffix=".py.tmp")
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             f.write(source)
-        os.chmod(tmp_name, 0o644)
+        os.chmod(tmp_name, mode)
         os.replace(tmp_name, target)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -113,22 +168,29 @@ def _write_atomically(target: Path, source: str) -> None:
         raise
 
 
+def _scratch_dir() -> Path:
+    if not _scratch:
+        _scratch.append(Path(tempfile.mkdtemp(prefix="ftcap-mavlink-")))  # mode 0700
+    return _scratch[0]
+
+
 def _generated_path(xml: Path) -> Path:
     name = f"ftcap_{_cache_key(xml)}.py"
-    # A read-only home (some containers) falls back to a per-user temporary directory.
-    fallback = Path(tempfile.gettempdir()) / f"ftcap-hil-mavlink-{os.getuid()}"
-    candidates = (cache_dir() / name, fallback / name)
-    for target in candidates:
-        if target.exists():
+    cache = _private_dir(cache_dir())
+    if cache is not None:
+        target = cache / name
+        if is_private(target, directory=False):
             return target
-    source = render(xml)
-    for target in candidates:
-        try:
-            _write_atomically(target, source)
-        except OSError:
-            continue
-        return target
-    raise OSError(f"cannot write the generated MAVLink dialect to any of {candidates}")
+        if not target.exists():
+            source = render(xml)
+            with contextlib.suppress(OSError):
+                write_atomically(target, source)
+                return target
+    # Read-only home, or a cache that is not ours: this process's own random directory.
+    target = _scratch_dir() / name
+    if not target.exists():
+        write_atomically(target, render(xml))
+    return target
 
 
 def load(xml: Path = XML) -> ModuleType:
@@ -149,3 +211,23 @@ def load(xml: Path = XML) -> ModuleType:
         spec.loader.exec_module(module)
         sys.modules[name] = module
         return module
+
+
+def share(module: Path) -> None:
+    """Make a cached module and its directory readable (not writable) by every user: an
+    image generates the cache as root at build time and runs as another user."""
+    module.chmod(0o644)
+    module.parent.chmod(0o755)
+
+
+def install(directory: Path | None = None) -> list[Path]:
+    """Write ``ftcap.py`` and ``ftcap.xml`` into ``directory`` (default: the installed
+    pymavlink's ``dialects/v20``), where ``mavutil.set_dialect("ftcap")`` imports them from.
+    Returns the paths written; OSError if the directory is not writable."""
+    target_dir = directory or pymavlink_definitions_dir()
+    target_dir.mkdir(parents=True, exist_ok=True)
+    module = target_dir / "ftcap.py"
+    write_atomically(module, render(), mode=0o644)
+    xml = target_dir / "ftcap.xml"
+    shutil.copyfile(XML, xml)
+    return [module, xml]

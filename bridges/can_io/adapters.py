@@ -44,7 +44,12 @@ from bridges.can_io.codec import (
     check_node_id,
     check_node_ids,
 )
-from bridges.can_io.esc_stream import DEFAULT_HOLD_S, DEFAULT_RATE_HZ, EscCommandStream
+from bridges.can_io.esc_stream import (
+    DEFAULT_ESC_TIMEOUT_S,
+    DEFAULT_HOLD_S,
+    DEFAULT_RATE_HZ,
+    EscCommandStream,
+)
 from bridges.can_io.force_map import ForceMap
 from bridges.can_io.node import ConflictDetector
 from bridges.can_io.ports import CanReceiver, CanSender
@@ -81,25 +86,43 @@ class CanThrusterSink(CanSender):
         self.stream: EscCommandStream | None = None
 
     def start_stream(
-        self, rate_hz: float = DEFAULT_RATE_HZ, hold_s: float = DEFAULT_HOLD_S
+        self,
+        rate_hz: float = DEFAULT_RATE_HZ,
+        hold_s: float = DEFAULT_HOLD_S,
+        *,
+        esc_timeout_s: float = DEFAULT_ESC_TIMEOUT_S,
+        restart_from_zero: bool = False,
     ) -> EscCommandStream:
-        """Re-send the latest command every ``1 / rate_hz`` s (1..400 Hz) from a thread,
-        zero once no ``send`` came for ``hold_s``; stopped by ``shutdown()``. Once only."""
+        """Re-send the latest command every ``1 / rate_hz`` s (1..400 Hz) from a thread;
+        zero once no ``send`` came for ``hold_s`` or no command reached the bus for
+        ``esc_timeout_s`` (the ESCs' own timeout), held until the next ``send`` or, with
+        ``restart_from_zero``, until ``take_lapse()`` (``esc_stream.py``). Stopped by
+        ``shutdown()``. Once only."""
         if self.stream is not None:
             raise RuntimeError("CanThrusterSink: the ESC stream is already running")
         zero = (0,) * self.force_map.m
-        self.stream = EscCommandStream(self.send_raw, zero, rate_hz=rate_hz, hold_s=hold_s)
+        self.stream = EscCommandStream(
+            self.send_raw, zero, rate_hz=rate_hz, hold_s=hold_s, esc_timeout_s=esc_timeout_s,
+            restart_from_zero=restart_from_zero,
+        )  # fmt: skip
         return self.stream.start()
 
+    def take_lapse(self) -> bool:
+        """True if the ESCs may have dropped to zero since the last call (the stream's
+        lapse: bus down, this process stalled, or no allocation for ``hold_s``): restart the
+        command from zero. Always False without a stream."""
+        return self.stream is not None and self.stream.take_lapse()
+
     def send(self, u: Sequence[float] | np.ndarray) -> bool:
-        """Send forces ``u`` (m,) in N now (and hold them in the ESC stream, if running).
-        Raises ``NonFiniteCommand`` for NaN/inf (nothing sent, nothing held).
+        """Send forces ``u`` (m,) in N now (and hold them in the ESC stream, if running;
+        during a lapse the stream may send zero instead). Raises ``NonFiniteCommand`` for
+        NaN/inf (nothing sent, nothing held).
 
         Returns False (and marks the port stale) if the bus refused the frames.
         """
         raw = self.force_map.to_raw(u)
         if self.stream is not None:
-            self.stream.update(tuple(int(v) for v in raw))
+            return self.stream.update(tuple(int(v) for v in raw))
         return self.send_raw(raw)
 
     def send_zero(self) -> bool:

@@ -134,3 +134,65 @@ def test_stream_stops_with_the_sink_and_nothing_follows(hub: CanHub) -> None:
 def test_stream_refuses_rates_it_cannot_keep(rate: float, hold: float) -> None:
     with pytest.raises(ValueError, match="can.esc_"):
         EscCommandStream(lambda raw: True, (0,), rate_hz=rate, hold_s=hold)
+
+
+class _Bus:
+    """What the stream's ``send`` sees: a list of sent commands and a switch for the bus."""
+
+    def __init__(self) -> None:
+        self.up = True
+        self.sent: list[tuple[int, ...]] = []
+
+    def send(self, raw: tuple[int, ...]) -> bool:
+        if self.up:
+            self.sent.append(raw)
+        return self.up
+
+
+def test_after_a_silent_bus_the_stream_holds_zero_until_the_lapse_is_taken() -> None:
+    bus = _Bus()
+    stream = EscCommandStream(bus.send, (0, 0), rate_hz=100.0, restart_from_zero=True)
+    t0 = time.monotonic_ns()
+    assert stream.update((100, -100), t0) and bus.sent == [(100, -100)]
+    assert not stream.take_lapse(t0)
+    bus.up = False
+    assert not stream.update((200, -200), t0 + 50_000_000)  # refused, 50 ms: no lapse yet
+    assert not stream.take_lapse(t0 + 100_000_000)
+    bus.up = True  # back after more than the ESCs' 200 ms: they are at zero
+    assert stream.update((300, -300), time.monotonic_ns() + 250_000_000)
+    assert bus.sent[-1] == (0, 0) and stream.lapses == 1  # not the command made before
+    assert stream.command_now(time.monotonic_ns()) == (0, 0)
+    assert stream.take_lapse() and not stream.take_lapse()
+    assert stream.update((10, -10)) and bus.sent[-1] == (10, -10)  # the restart from zero
+
+
+def test_a_lapse_lasts_while_the_bus_is_down() -> None:
+    bus = _Bus()
+    stream = EscCommandStream(bus.send, (0,), rate_hz=100.0, restart_from_zero=True)
+    stream.update((50,))
+    bus.up = False
+    later = time.monotonic_ns() + 300_000_000
+    for k in range(3):  # each cycle of the owner during the outage: reset, one ramp step
+        assert stream.take_lapse(later + k * 100_000_000)
+        assert not stream.update((10 * (k + 1),), later + k * 100_000_000)
+    assert stream.lapses == 1
+    bus.up = True
+    assert stream.update((40,)) and bus.sent[-1] == (40,)
+    assert not stream.take_lapse()
+
+
+def test_a_hold_that_ran_out_is_a_lapse_and_without_restart_the_next_update_resumes() -> None:
+    bus = _Bus()
+    stream = EscCommandStream(bus.send, (0,), rate_hz=100.0, hold_s=0.5)
+    t0 = time.monotonic_ns()
+    stream.update((70,), t0)
+    assert stream.command_now(t0 + 400_000_000) == (70,)
+    assert stream.command_now(t0 + 600_000_000) == (0,)
+    assert (stream.holds_expired, stream.lapses) == (1, 1)
+    assert stream.update((80,)) and bus.sent[-1] == (80,)  # no restart_from_zero: resumes
+    assert stream.take_lapse() and not stream.take_lapse()
+
+
+def test_esc_timeout_must_exceed_a_period() -> None:
+    with pytest.raises(ValueError, match="can.esc_command_timeout_s"):
+        EscCommandStream(lambda raw: True, (0,), rate_hz=4.0, esc_timeout_s=0.2)

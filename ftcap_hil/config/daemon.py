@@ -9,13 +9,14 @@ The shipped defaults are ``ftcap_hil/data/hil/allocator.toml``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ftcap_hil.config.bridges import allocator_ports_from
 from ftcap_hil.config.scenario import core_config_from
 from ftcap_hil.config.tables import Table
+from ftcap_hil.config.thruster_curves import limited_to_curves
 from ftcap_hil.config.toml import HIL_DATA, read_toml
 from ftcap_hil.config.vessel import surface_vessel_from
 from ftcap_hil.core.status import Mode
@@ -64,4 +65,10 @@ def load_daemon_config(path: str | Path | None, overrides: list[str] | None = No
     with Table.document(doc) as root:
         daemon = daemon_config_from(root)
         ports = allocator_ports_from(root, daemon.thrusters.m)
+        if not ports.can.esc_hold_s > 1.0 / daemon.rate_hz:  # else every cycle is a lapse
+            raise root.table("can").error(
+                "esc_hold_s", f"expected more than the daemon's period {1 / daemon.rate_hz:.3g} s"
+            )
+    # The allocator knows its thrusters' curves: it never asks for more than they can give.
+    daemon = replace(daemon, thrusters=limited_to_curves(daemon.thrusters, ports.can.curves))
     return LoadedConfig(daemon, doc.data, doc.source, ports)

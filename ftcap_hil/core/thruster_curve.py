@@ -132,6 +132,16 @@ class ThrusterCurve:
         keep = np.concatenate([np.diff(x) > 0.0, [True]])  # dead_zone 0: 0 appears twice
         return cls.from_table(x[keep], t[keep], name)
 
+    def scaled(self, thrust_max_n: float) -> ThrusterCurve:
+        """The same shape with every thrust multiplied so that full ahead gives
+        ``thrust_max_n`` (N, > 0); reverse keeps its ratio to forward. For a model of a
+        thruster whose size differs from the one the table was measured on."""
+        if not (np.isfinite(thrust_max_n) and thrust_max_n > 0.0):
+            raise CurveError(f"{self.name}: scale to a thrust > 0 N, got {thrust_max_n!r}")
+        thrust = self.thrust_n * (thrust_max_n / self.thrust_max_n)
+        thrust[-1] = thrust_max_n  # exactly, whatever the rounding of the factor
+        return ThrusterCurve.from_table(self.fraction, thrust, self.name)
+
     @property
     def reversible(self) -> bool:
         """False for a unidirectional thruster (no point below x = 0)."""

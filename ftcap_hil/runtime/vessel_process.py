@@ -127,7 +127,7 @@ class VesselPorts:
     def _open_can(self, c: CanSettings, ths: ThrusterSet) -> None:
         from bridges.can_io.adapters import CanCommandSource, CanEscStatusSink
         from bridges.can_io.bus import CanBusError, open_can_bus
-        from bridges.can_io.force_map import ForceRawMap
+        from bridges.can_io.force_map import CurveForceMap, ForceRawMap
         from bridges.can_io.hub import CanHub, parse_channel
 
         ids = c.esc_node_ids if c.esc_node_ids is not None else [20 + i for i in range(ths.m)]
@@ -137,7 +137,11 @@ class VesselPorts:
                 self._stack.callback(CanHub(host, port).start().shutdown)
             bus = open_can_bus(c.interface, c.channel)
             self._stack.callback(bus.shutdown)
-            force_map = ForceRawMap.from_limits(ths.u_min, ths.u_max, c.deadband_n)
+            force_map: Any = (  # the physical curves: a wrong map in the allocator shows
+                ForceRawMap.from_limits(ths.u_min, ths.u_max, c.deadband_n)
+                if c.curves is None
+                else CurveForceMap.create(c.curves, c.deadband_n)
+            )
             source = CanCommandSource(bus, force_map, allocator_node_id=c.node_id)
             self._stack.callback(source.shutdown)
             self.esc_sink = CanEscStatusSink(bus, ids)

@@ -127,3 +127,13 @@ def test_the_shipped_wrong_curve_under_delivers_against_the_t200() -> None:
     got = true.thrust(wrong.fraction_for(asked))
     assert np.all(got < asked)  # short at every partial command
     assert float(got[0]) == 0.0  # 2 N asks for 5.5 % command: inside the dead zone
+
+
+def test_scaled_keeps_the_shape_and_the_reverse_ratio() -> None:
+    t200 = ThrusterCurve.from_table([-1.0, -0.1, 0.0, 0.1, 1.0], [-28.6, 0.0, 0.0, 0.0, 36.4])
+    small = t200.scaled(0.1)
+    assert small.thrust_max_n == 0.1 and small.thrust_min_n == pytest.approx(-0.1 * 28.6 / 36.4)
+    assert np.array_equal(small.fraction, t200.fraction)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(CurveError, match="scale to a thrust > 0 N"):
+            t200.scaled(bad)

@@ -3,7 +3,8 @@
 Pure: no I/O, no clock. The process shell (``ftcap_hil.runtime.vessel_process``) feeds it
 commands with their receive stamps, fault injections, and steps it on its own deadlines.
 
-Per step of length ``dt_s`` (sim time), with the faults held over the step::
+Per step of length ``dt_s`` (sim time), with the faults held over the step (or each part
+of it, below)::
 
     u     = clip(command, u_min, u_max)        if the command is fresh, else 0   (m,) N
     F     = delta * u + f                      produced force per thruster       (m,) N
@@ -15,7 +16,9 @@ A command takes effect when it was received, as on a real thruster: if its stamp
 inside the step (between the previous ``step`` call's ``now_s`` and this one's), the step is
 split there and the command acting before keeps the first part, so the motion matches the
 allocator's time average of its commands (docs/decisions.md). Only the latest command of a
-step is known to the step.
+step is known to the step. A scheduled fault change inside a step splits it too: the fault
+acts from its scheduled time, not from the next step's start (up to one step late, which
+decided whether an estimator sample straddled the onset), as in the offline simulator.
 
 Watchdog: a command older than ``command_timeout_s`` (on the caller's clock, the one the
 stamps come from: wall time even when the sim runs faster than real time) is dropped and the
@@ -89,7 +92,7 @@ class SimSample:
     command_age_s: float  # inf: no command ever
     produced: FloatArray  # F = delta u + f, N, mean over the step (a command may arrive in it)
     tau: FloatArray  # (3,) B F, mean over the step
-    delta: FloatArray
+    delta: FloatArray  # the true faults of the step's last part (a scheduled change splits it)
     f: FloatArray
     silent: BoolArray
 
@@ -169,8 +172,12 @@ class VesselSim:
 
     def faults(self) -> Truth:
         """True (delta, f) acting now: schedule at ``t_s`` overridden by injections."""
+        return self._truth_at(self._t_s)
+
+    def _truth_at(self, t_s: float) -> Truth:
+        """True (delta, f) at sim time ``t_s``: the schedule overridden by injections."""
         if self.config.schedule is not None:
-            base = self.config.schedule.at(self._t_s)
+            base = self.config.schedule.at(t_s)
             delta, f = base.delta, base.f
         else:
             delta, f = np.ones(self.m), np.zeros(self.m)
@@ -203,7 +210,6 @@ class VesselSim:
         age = self.command_age_s(now_s)
         fresh = age <= self.config.command_timeout_s
         u = self._command.copy() if fresh else np.zeros(self.m)
-        truth = self.faults()
         silent = self.silent()
         # Fraction of the step that ran before the latest command arrived (module docstring).
         before = 0.0
@@ -212,24 +218,42 @@ class VesselSim:
             before = (self._command_stamp_s - last) / (now_s - last)
         plant, substeps, B = self.config.plant, self.config.rk4_substeps, self.config.B
         prev = self._acting
-        if before > 0.0:
-            early = B @ (truth.delta * prev + truth.f)
-            self._x = plant.step_rk4(self._x, early, before * dt_s, substeps)
-        produced = truth.delta * u + truth.f
-        tau = B @ produced
-        self._x = plant.step_rk4(self._x, tau, (1.0 - before) * dt_s, substeps)
+        produced_sum = np.zeros(self.m)
+        for at_s, frac, new_command in self._parts(dt_s, before):
+            truth = self._truth_at(at_s)
+            produced = truth.delta * (u if new_command else prev) + truth.f
+            self._x = plant.step_rk4(self._x, B @ produced, frac * dt_s, substeps)
+            produced_sum += frac * produced
         self._x[2] = float(wrap_angle(self._x[2]))  # psi in (-pi, pi], as telemetry reports it
         self._t_s += dt_s
         self._produced = produced
         self._responding = truth.delta > 0.0
         self._acting = u
         self._last_now_s = now_s
-        u_mean = before * prev + (1.0 - before) * u if before > 0.0 else u
-        produced_mean = truth.delta * u_mean + truth.f
         return SimSample(
-            self._t_s, self._x.copy(), u, fresh, age, produced_mean, B @ produced_mean,
+            self._t_s, self._x.copy(), u, fresh, age, produced_sum, B @ produced_sum,
             truth.delta, truth.f, silent,
         )  # fmt: skip
+
+    def _parts(self, dt_s: float, before: float) -> list[tuple[float, float, bool]]:
+        """The step [t, t + dt_s] cut where the latest command arrived (``before``, a fraction
+        of the step) and where the fault schedule changes: per part, the sim time its faults
+        are taken at (a schedule change: exactly its time), its fraction of the step, and
+        whether the latest command acts in it."""
+        t = self._t_s
+        edges = [(0.0, t)]
+        if before > 0.0:
+            edges.append((before, t + before * dt_s))
+        if self.config.schedule is not None:
+            changes = self.config.schedule.change_times()
+            edges += [((c - t) / dt_s, c) for c in changes if t < c < t + dt_s]
+        edges.sort()
+        edges.append((1.0, t + dt_s))
+        return [
+            (at_s, b - a, a >= before)
+            for (a, at_s), (b, _) in zip(edges[:-1], edges[1:], strict=True)
+            if b > a
+        ]
 
     def esc_statuses(self) -> list[EscStatus]:
         """Telemetry of the last step's produced forces, for the ESCs that are not silent."""

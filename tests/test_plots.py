@@ -41,6 +41,8 @@ def _check_png(path: Path) -> None:
     [
         ("paper-4.1", None, COMMON),
         ("paper-4.2-ex2-bias008", 40.0, [*COMMON, "xy_path.png"]),
+        # a Fossen 3-DOF truth model: the replay command a campaign prints once crashed here
+        ("cybership2-station", 10.0, [*COMMON, "xy_path.png"]),
     ],
 )
 def test_write_plots(

@@ -22,7 +22,7 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from ftcap_hil.core.messages import FloatArray  # noqa: E402
-from ftcap_hil.core.plants import SurfaceVessel  # noqa: E402
+from ftcap_hil.core.plants import LinearPlant  # noqa: E402
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.report.records import RunRecord  # noqa: E402
 
@@ -56,7 +56,7 @@ def _scenario(records: Records) -> Scenario:
 
 
 def _is_vessel(sc: Scenario) -> bool:
-    return isinstance(sc.plant, SurfaceVessel)
+    return not isinstance(sc.plant, LinearPlant)  # every other plant has a pose (records.py)
 
 
 def _v_label(sc: Scenario, j: int, prefix: str = "") -> str:

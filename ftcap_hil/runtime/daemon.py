@@ -38,7 +38,7 @@ from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.esc_watchdog import EscWatchdog
-from ftcap_hil.runtime.estimation import EstimationSampler
+from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
 from ftcap_hil.runtime.signals import capture_signals
@@ -78,7 +78,8 @@ class StatusSink(Protocol):
 
 @dataclass
 class Ports:
-    """The daemon's ports. Several setpoint or telemetry mailboxes: the freshest wins."""
+    """The daemon's ports. Several setpoint mailboxes: the latest received wins; several
+    telemetry mailboxes: the newest measurement wins."""
 
     setpoints: list[Mailbox[WrenchSetpoint]]
     telemetry: list[Mailbox[Odometry]]
@@ -217,17 +218,18 @@ class AllocatorDaemon:
     def cycle(self, now: int) -> CycleResult | None:
         """One cycle at ``now`` (monotonic ns); the core's result, None while the setpoint
         is stale (zero thrust)."""
+        started = self.loop.clock()
         self.cycles += 1
         dt = self._dt_s(now)
         setpoint, sp_stamp = _latest(self.ports.setpoints)
-        odom, tel_stamp = _latest(self.ports.telemetry)
+        odom, tel_stamp = self._telemetry()
         fresh = self._freshness(now, sp_stamp, tel_stamp)
         sample = None if fresh.telemetry_stale else self.sampler.sample(odom, tel_stamp)
         result = None
         self._restart_after_lapse()
         if fresh.setpoint_stale:
             self._tau_d = np.zeros(self.core.k)
-            self._send(np.zeros(self.core.m), now)
+            self._send(np.zeros(self.core.m), now, started)
             self.core.reset_command()
         else:
             self._tau_d = setpoint.tau
@@ -235,7 +237,7 @@ class AllocatorDaemon:
             result = self.core.step(
                 setpoint.tau, obs, u_sample=u_mean, dt_s=dt, forced_dead=fresh.esc_failed
             )
-            self._send(result.u, now)
+            self._send(result.u, now, started)
             if sp_stamp != self._last_sp_stamp:
                 self._last_sp_stamp = sp_stamp
                 self.latency.reaction(self.loop.clock() - sp_stamp)
@@ -260,6 +262,13 @@ class AllocatorDaemon:
             "thruster commands reach the ESCs again",
         ):
             self.lapses += lapsed
+
+    def _telemetry(self) -> tuple[Odometry | None, int]:
+        """The newest odometry over the telemetry ports (by vessel time, not by receipt:
+        :func:`~ftcap_hil.runtime.estimation.newest_odometry`) and its receipt stamp."""
+        window_ns = int(self.config.telemetry_timeout_s * 1e9)
+        slot = newest_odometry([box.latest() for box in self.ports.telemetry], window_ns)
+        return (None, -1) if slot is None else (slot.value, slot.stamp_ns)
 
     def _dt_s(self, now: int) -> float | None:
         """Seconds since the last cycle, clamped to ``dt_clamp`` periods (None: first)."""
@@ -293,13 +302,17 @@ class AllocatorDaemon:
         )
         return Freshness(sp_age, tel_age, sp_stale, tel_stale, esc_failed)
 
-    def _send(self, u: FloatArray, now: int) -> None:
+    def _send(self, u: FloatArray, now: int, started: int) -> None:
+        """``u`` to the thrusters; the sampler gets it stamped when it went out: ``now`` plus
+        the cycle's work so far (the loop's clock read at ``started`` and after the send)."""
         if not np.isfinite(u).all():  # cannot happen (the allocator clips), never on the bus
             log.error("non-finite command %s replaced by zero", u)
             u = np.zeros_like(u)
         if not self.ports.thrusters.send(u):
             self.not_sent += 1
-        self.sampler.command_sent(now, u)
+        # Not ``now``: estimation and the QP take a millisecond or more, and a command
+        # stamped before it went out makes the interval's mean lead the motion by as much.
+        self.sampler.command_sent(now + self.loop.clock() - started, u)
 
     def _announce(self, text: str, severity: Severity) -> None:
         _log_announce(text, severity)

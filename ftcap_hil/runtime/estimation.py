@@ -1,7 +1,8 @@
 """The estimator's samples: the plant's state at both ends of an interval and the mean command
 over the same interval.
 
-Once per ``estimation_period_s`` of telemetry, :class:`EstimationSampler` pairs two odometry
+Once per ``estimation_period_s`` of telemetry (the newest sample over the telemetry ports,
+:func:`newest_odometry`), :class:`EstimationSampler` pairs two odometry
 samples ``x0 = [eta, nu]`` and ``x1`` (NED pose, body velocities) ``dt`` apart, as a core
 :class:`~ftcap_hil.core.estimation.Observation`, with the time-weighted mean of the commands
 the thrusters had over that interval (from a :class:`CommandHistory` of what was sent, with
@@ -13,12 +14,36 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from ftcap_hil.core.estimation import Observation
 from ftcap_hil.core.messages import FloatArray, Odometry
+from ftcap_hil.ports.mailbox import Stamped
+
+
+def newest_odometry(
+    slots: Sequence[Stamped[Odometry] | None], window_ns: int
+) -> Stamped[Odometry] | None:
+    """The newest measurement among the telemetry ports' latest samples (None: none yet).
+
+    The same odometry often comes over two transports (MAVLink and Zenoh), one copy a
+    millisecond or more after the other, so by receipt stamps alone the late copy of an older
+    sample can win over a newer one. Among the samples received within ``window_ns`` of the
+    latest receipt (a port gone silent drops out), the latest vessel time
+    (``Odometry.time_s``) wins, its first copy on a tie (the least delayed); if one of them
+    carries no vessel time, the latest receipt.
+    """
+    got = [s for s in slots if s is not None]
+    if not got:
+        return None
+    last = max(s.stamp_ns for s in got)
+    recent = [s for s in got if s.stamp_ns >= last - window_ns]
+    if not all(math.isfinite(s.value.time_s) for s in recent):
+        return max(recent, key=lambda s: s.stamp_ns)
+    return max(recent, key=lambda s: (s.value.time_s, -s.stamp_ns))
 
 
 class CommandHistory:
@@ -137,7 +162,10 @@ class EstimationSampler:
         # stamps jitter, and a threshold on them skips samples whenever the telemetry period
         # equals the estimation period.
         dt = odom.time_s - prev.odom.time_s
-        if not (math.isfinite(dt) and dt > 0):
+        if math.isfinite(dt) and dt <= 0:  # vessel time went back (a restart): a new interval
+            self._last = point
+            return None
+        if not math.isfinite(dt):  # no vessel time: the receipt stamps
             dt = (receipt_ns - prev.receipt_ns) * 1e-9
         if dt < 0.9 * self.period_s:
             return None

@@ -242,6 +242,7 @@ TOPOLOGY_KEYS = (
     "can.",
     "mavlink.connection=",
     "mavlink.peers=",
+    "mavlink.relay=",
     "mavlink.bind_all_interfaces=",
     "zenoh.",
 )

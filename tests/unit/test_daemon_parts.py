@@ -11,6 +11,7 @@ import os
 import re
 import signal
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -22,10 +23,10 @@ from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.messages import EscStatus, Odometry, WrenchSetpoint
 from ftcap_hil.core.plants import SurfaceVessel
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
-from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.ports.mailbox import Mailbox, Stamped
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.daemon import AllocatorDaemon, DaemonConfig, Ports
-from ftcap_hil.runtime.estimation import EstimationSampler
+from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.param_sync import ParamSync
 from ftcap_hil.runtime.signals import ForcedExit
@@ -91,11 +92,35 @@ def test_the_sampler_pairs_states_a_period_apart_with_the_commands_between() -> 
     np.testing.assert_allclose(got.u_mean, 0.0 * u, atol=1e-12)
 
 
+def test_the_sampler_starts_a_new_interval_when_vessel_time_goes_back() -> None:
+    s = EstimationSampler(period_s=0.3, use_vessel_clock=False)
+    s.command_sent(0, np.ones(4))
+    s.sample(_odom(100.0), 10 * MS)
+    assert s.sample(_odom(0.0, 0.5), 310 * MS) is None  # a restart: no interval across it
+    got = s.sample(_odom(0.3, 0.6), 610 * MS)
+    assert got is not None and got.observation.dt_s == pytest.approx(0.3)
+    assert got.observation.x_prev[3] == 0.5
+
+
 def test_the_sampler_has_no_mean_before_the_first_command() -> None:
     s = EstimationSampler(period_s=0.3, use_vessel_clock=True)
     s.sample(_odom(0.0), 10 * MS)
     s.command_sent(100 * MS, np.ones(4))  # after the interval's start
     assert s.sample(_odom(0.3), 310 * MS) is None
+
+
+def test_the_newest_odometry_is_the_latest_vessel_time_not_the_latest_receipt() -> None:
+    mav_new = Stamped(_odom(0.30), 300 * MS)
+    zenoh_old = Stamped(_odom(0.28), 301 * MS)  # the late copy of the sample before
+    assert newest_odometry([mav_new, zenoh_old], S) is mav_new
+    zenoh_same = Stamped(_odom(0.30), 302 * MS)
+    assert newest_odometry([zenoh_same, mav_new], S) is mav_new  # a tie: the first copy
+    assert newest_odometry([None, zenoh_old], S) is zenoh_old
+    assert newest_odometry([None, None], S) is None
+    silent = Stamped(_odom(9.0), 100 * MS)  # a port gone quiet (a vessel restarted since)
+    assert newest_odometry([silent, zenoh_old], 100 * MS) is zenoh_old
+    timeless = Stamped(_odom(math.nan), 299 * MS)
+    assert newest_odometry([mav_new, timeless, zenoh_old], S) is zenoh_old  # by receipt
 
 
 # --- status assembly and announcements --------------------------------------------------
@@ -411,6 +436,55 @@ def test_a_second_signal_forces_the_exit_and_the_zero_still_goes_out() -> None:
         d.run(max_cycles=1000)
     assert np.any(sink.commands[-2] != 0) and np.all(sink.commands[-1] == 0)
     assert d.cycles == 1 and signal.getsignal(signal.SIGTERM) is before
+
+
+class SlowSink(Sink):
+    """A bus write that takes 20 ms."""
+
+    def send(self, u: np.ndarray) -> bool:
+        time.sleep(0.02)
+        return super().send(u)
+
+
+def test_a_command_is_stamped_when_it_went_out_not_when_the_cycle_began() -> None:
+    sink = SlowSink()
+    ports = Ports([Mailbox("setpoint")], [Mailbox("odometry")], sink)
+    d = AllocatorDaemon(DaemonConfig(THS, B, SurfaceVessel(), CoreConfig(), rate_hz=10.0), ports)
+    d.cycle(1 * S)  # no setpoint: zero
+    ports.setpoints[0].put(WrenchSetpoint.checked(SURGE), 2 * S)
+    r = d.cycle(2 * S)
+    assert r is not None and np.any(r.u != 0)
+    mean = d.sampler.history.mean(int(1.5 * S), int(2.1 * S))
+    assert mean is not None
+    # out at >= 2.02 s: at most 80 ms of the 600 ms (100 ms if stamped at the cycle's start)
+    assert np.all(np.abs(mean) <= np.abs(r.u) * 0.08 / 0.6 + 1e-12), (mean, r.u)
+
+
+def test_a_late_copy_of_older_telemetry_does_not_replace_the_newest() -> None:
+    """The same odometry over MAVLink and Zenoh: the Zenoh copy of the sample before arriving
+    after the MAVLink copy of the next one leaves the newest in use for the interval."""
+    d, _, _ = _daemon()
+    seen: list[Observation | None] = []
+    step = d.core.step
+
+    def spy(*args: object, **kw: object) -> CycleResult:
+        seen.append(args[1])  # type: ignore[arg-type]
+        return step(*args, **kw)  # type: ignore[arg-type]
+
+    d.core.step = spy  # type: ignore[method-assign]
+    sp = d.ports.setpoints[0]
+    d.ports.telemetry.append(Mailbox("zenoh odometry"))
+    mav, zenoh = d.ports.telemetry
+    sp.put(WrenchSetpoint.checked(SURGE), 1 * S)
+    d.cycle(1 * S)
+    mav.put(_odom(0.0), 1 * S + 10 * MS)
+    d.cycle(1 * S + 11 * MS)  # opens the interval
+    mav.put(_odom(0.3, 0.02), 1 * S + 310 * MS)
+    zenoh.put(_odom(0.0), 1 * S + 312 * MS)  # late, and older
+    d.cycle(1 * S + 313 * MS)
+    obs = seen[-1]
+    assert obs is not None and obs.dt_s == pytest.approx(0.3)  # the vessel-time interval
+    np.testing.assert_array_equal(obs.x_now, [0.0, 0.0, 0.0, 0.02, 0.0, 0.0])
 
 
 def test_telemetry_a_period_apart_reaches_the_estimator() -> None:

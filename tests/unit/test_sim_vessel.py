@@ -177,6 +177,27 @@ def test_schedule_by_sim_time_and_injection_overrides_it() -> None:
     assert (sim.faults().delta[1], sim.faults().f[1]) == (1.0, 0.01)
 
 
+def test_a_scheduled_fault_acts_from_its_time_inside_a_step() -> None:
+    """An onset 40 % into a step (and a command received 70 % into it): the step is cut at
+    both, the fault acting from its scheduled time, not from the next step."""
+    onset = 0.1 + 0.4 * DT
+    event = FaultEvent(onset, math.inf, 1, np.float64(0.0), np.float64(0.08))
+    sim = make_sim(schedule=FaultSchedule(4, (event,)))
+    run_steps(sim, 5)  # t = 0.1, SURGE acting
+    x0 = sim.x
+    new = -SURGE
+    sim.set_command(new, 4 * DT + 0.7 * DT)
+    sample = sim.step(DT, 5 * DT)
+    faulty = SURGE * [1.0, 0.0, 1.0, 1.0] + [0.0, 0.08, 0.0, 0.0]
+    after = new * [1.0, 0.0, 1.0, 1.0] + [0.0, 0.08, 0.0, 0.0]
+    x = PLANT.step_rk4(x0, B @ SURGE, 0.4 * DT, 8)
+    x = PLANT.step_rk4(x, B @ faulty, 0.3 * DT, 8)
+    x = PLANT.step_rk4(x, B @ after, 0.3 * DT, 8)
+    np.testing.assert_allclose(sample.x, x, atol=1e-12)
+    np.testing.assert_allclose(sample.produced, 0.4 * SURGE + 0.3 * faulty + 0.3 * after)
+    assert (sample.delta[1], sample.f[1]) == (0.0, 0.08)  # the step's last part
+
+
 def test_watchdog_zeroes_stale_commands_but_a_stuck_bias_stays() -> None:
     sim = make_sim(command_timeout_s=0.5)
     assert not sim.step(DT, 0.0).command_fresh  # never commanded: zero

@@ -345,7 +345,8 @@ def test_a_silent_esc_is_noticed_and_its_thruster_dropped(silent: Hil) -> None:
     # holding the origin with three live thrusters and no disturbance, all commands are 0).
     assert (mute == 0).all(), f"thruster {SILENT + 1} still commanded: {mute.tolist()}"
     final = silent.statuses[-1]
-    assert final["delta_hat"][SILENT] == 0.0 and final["flags"] & 8, final
+    assert final["delta_hat"][SILENT] == 0.0 and final["fault_detected"], final
+    assert final["faulty"][SILENT] and sum(final["faulty"]) == 1, final
 
 
 # --- the allocator alone -----------------------------------------------------------------

@@ -3,7 +3,7 @@
 
 Same keys in both files except where the role differs: the allocator's ``[can]`` has
 ``node_id`` (its own node), ``node_name``, ``esc_monitor`` and the ESC command stream's
-``esc_rate_hz``, ``esc_hold_s``, ``esc_command_timeout_s``; the vessel's
+``esc_rate_hz`` (0: no stream), ``esc_hold_s``, ``esc_command_timeout_s``; the vessel's
 ``allocator_node_id`` (the only node it accepts commands from) and ``start_hub``; both
 ``thruster_curve`` and ``curve_thrust_max_n`` (:mod:`ftcap_hil.config.thruster_curves`).
 The allocator's ``[mavlink]`` has ``max_wrench`` and ``wrench_limit``, its ``[zenoh]``
@@ -159,11 +159,12 @@ def _esc_stream(t: Table) -> dict[str, Any]:
     """The allocator's ESC command stream and node keys (``CanSettings``)."""
     from bridges.can_io.esc_stream import check_rate
 
-    rate = t.number("esc_rate_hz", 100.0, positive=True)
+    rate = t.number("esc_rate_hz", 100.0, lo=0.0)  # 0: no stream, one command per cycle
     hold = t.number("esc_hold_s", 1.0, positive=True)
     timeout = t.number("esc_command_timeout_s", 0.2, positive=True)
     try:
-        check_rate(rate, hold, timeout)
+        if rate != 0.0:
+            check_rate(rate, hold, timeout)
     except ValueError as e:
         raise t.error(None, str(e)) from e
     name = t.string("node_name", "org.ftcap.allocator")

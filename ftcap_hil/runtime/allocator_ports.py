@@ -36,8 +36,8 @@ class AllocatorSettings(Protocol):
 
 def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, Any]:
     """The CAN bus, the thruster sink on it (zero on close) with its ESC command stream
-    (restarting from zero after a lapse), the ESC status source (None with ``[can]
-    esc_monitor = false``) and the node's GetNodeInfo server."""
+    (restarting from zero after a lapse; none with ``esc_rate_hz = 0``), the ESC status
+    source (None with ``[can] esc_monitor = false``) and the node's GetNodeInfo server."""
     from bridges.can_io.adapters import CanEscStatusSource, CanThrusterSink
     from bridges.can_io.bus import open_can_bus
 
@@ -46,9 +46,11 @@ def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, 
     bus = stack.enter_context(open_can_bus(c.interface, c.channel))
     sink = CanThrusterSink(bus, _force_map(c, ths), node_id=c.node_id, zero_on_shutdown=True)
     stack.enter_context(sink)
-    sink.start_stream(
-        c.esc_rate_hz, c.esc_hold_s, esc_timeout_s=c.esc_command_timeout_s, restart_from_zero=True
-    )
+    if c.esc_rate_hz > 0.0:  # 0: one RawCommand per cycle, as the allocation runs
+        sink.start_stream(
+            c.esc_rate_hz, c.esc_hold_s, esc_timeout_s=c.esc_command_timeout_s,
+            restart_from_zero=True,
+        )  # fmt: skip
     esc = None
     if c.esc_monitor:
         esc = stack.enter_context(CanEscStatusSource(bus, ths.m, esc_node_ids=c.esc_node_ids))

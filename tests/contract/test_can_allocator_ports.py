@@ -186,3 +186,14 @@ def test_the_vessel_decodes_with_its_own_physical_curve(
             assert np.all(got.value.u >= lo * u) and np.all(got.value.u <= hi * u), got.value.u
     finally:
         vessel.shutdown()
+
+
+def test_esc_rate_zero_sends_one_command_per_send(hub: CanHub) -> None:
+    with contextlib.ExitStack() as stack:
+        (_, ports), tap = _open(hub, stack, "can.esc_rate_hz=0")
+        t0 = time.monotonic_ns()
+        for k in range(3):
+            assert ports.thrusters.send(np.full(4, 0.01 * (k + 1)))
+        assert _wait_for(lambda: len(tap.raw_since(t0)) >= 3, 5.0)
+        time.sleep(0.5)  # nothing follows: no stream
+        assert len(tap.raw_since(t0)) == 3 and not ports.thrusters.take_lapse()

@@ -90,6 +90,8 @@ def test_allocator_esc_stream_keys() -> None:
     can = allocator_ports_from(root, 2).can
     root.finish()
     assert (can.esc_rate_hz, can.esc_hold_s, can.esc_command_timeout_s) == (200, 0.5, 0.1)
+    off = allocator_ports_from(_root("[can]\nesc_rate_hz = 0\n"), 2).can
+    assert off.esc_rate_hz == 0.0  # no stream: the hold and timeout checks do not apply
     default = allocator_ports_from(_root(""), 2).can
     assert (default.esc_rate_hz, default.esc_command_timeout_s) == (100.0, 0.2)
     assert default.node_name == "org.ftcap.allocator"
@@ -99,6 +101,8 @@ def test_allocator_esc_stream_keys() -> None:
     ("text", "message"),
     [
         ("esc_rate_hz = 500", "can.esc_rate_hz: expected 1..400 Hz, got 500"),
+        ("esc_rate_hz = 0.5", "can.esc_rate_hz: expected 1..400 Hz, got 0.5"),
+        ("esc_rate_hz = -1", "[can] esc_rate_hz: expected a finite number >= 0"),
         ("esc_rate_hz = 10\nesc_hold_s = 0.05", "can.esc_hold_s: expected more than one period"),
         ("esc_rate_hz = 4", "can.esc_command_timeout_s: expected more than one period"),
         ('node_name = "bo\u00e9t"', "node_name: expected 1..80 ASCII characters"),

@@ -327,7 +327,11 @@ class CanCommandSource(CanReceiver):
         self.force_map = force_map
         self._allocator = allocator_node_id
         self.commands: Mailbox[ThrusterCommand] = Mailbox("can_thruster_command")
+        # The same, put only when the value changes: stamped when a command first came, not
+        # when the ESC stream last repeated it (when it took effect on a real thruster).
+        self.changes: Mailbox[ThrusterCommand] = Mailbox("can_thruster_command_change")
         self.raw_commands: Mailbox[tuple[int, ...]] = Mailbox("can_raw_command")
+        self._last_raw: tuple[int, ...] | None = None
         self.allocator_status: Mailbox[NodeStatusMsg] = Mailbox("can_allocator_status")
         self.conflict = None if allocator_node_id is None else ConflictDetector(allocator_node_id)
         self._obey_in_conflict = obey_in_conflict
@@ -357,8 +361,12 @@ class CanCommandSource(CanReceiver):
                     f"RawCommand: {len(msg.raw)} values for {self.force_map.m} thrusters"
                 )
             u = self.force_map.to_force(msg.raw)
+            command = ThrusterCommand.checked(u, self.force_map.m)
             self.raw_commands.put(msg.raw, now_ns)
-            self.commands.put(ThrusterCommand.checked(u, self.force_map.m), now_ns)
+            if msg.raw != self._last_raw:
+                self._last_raw = msg.raw
+                self.changes.put(command, now_ns)
+            self.commands.put(command, now_ns)
 
     def _count_malformed(self) -> None:
         self.commands.count_malformed()

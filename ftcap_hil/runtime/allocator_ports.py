@@ -35,9 +35,9 @@ class AllocatorSettings(Protocol):
 
 
 def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, Any]:
-    """The CAN bus, the thruster sink on it (zero on close) with its ESC command stream
-    (restarting from zero after a lapse; none with ``esc_rate_hz = 0``), the ESC status
-    source (None with ``[can] esc_monitor = false``) and the node's GetNodeInfo server."""
+    """The CAN bus, the thruster sink on it (zero on close; its ESC command stream is
+    started by ``build_ports``), the ESC status source (None with ``[can] esc_monitor =
+    false``) and the node's GetNodeInfo server."""
     from bridges.can_io.adapters import CanEscStatusSource, CanThrusterSink
     from bridges.can_io.bus import open_can_bus
 
@@ -46,11 +46,6 @@ def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, 
     bus = stack.enter_context(open_can_bus(c.interface, c.channel))
     sink = CanThrusterSink(bus, _force_map(c, ths), node_id=c.node_id, zero_on_shutdown=True)
     stack.enter_context(sink)
-    if c.esc_rate_hz > 0.0:  # 0: one RawCommand per cycle, as the allocation runs
-        sink.start_stream(
-            c.esc_rate_hz, c.esc_hold_s, esc_timeout_s=c.esc_command_timeout_s,
-            restart_from_zero=True,
-        )  # fmt: skip
     esc = None
     if c.esc_monitor:
         esc = stack.enter_context(CanEscStatusSource(bus, ths.m, esc_node_ids=c.esc_node_ids))
@@ -110,7 +105,8 @@ def build_ports(
     cmd_log: CommandLog | None,
 ) -> tuple[Ports, Any]:
     """The daemon's ports from ``cfg``'s [can], [mavlink] and [zenoh] tables, and the
-    MAVLink parameter server (None without MAVLink)."""
+    MAVLink parameter server (None without MAVLink). The ESC command stream (unless
+    ``esc_rate_hz = 0``) re-sends the latest command from here on."""
     sink, esc = open_can(cfg, stack)
     ports = Ports(
         setpoints=[],
@@ -122,6 +118,12 @@ def build_ports(
     )
     params = open_mavlink(cfg, stack, ports)
     open_zenoh(cfg, stack, ports)
+    c = cfg.ports.can
+    if c.esc_rate_hz > 0.0:  # last: opening the others must not stall its first ticks
+        sink.start_stream(
+            c.esc_rate_hz, c.esc_hold_s, esc_timeout_s=c.esc_command_timeout_s,
+            restart_from_zero=True,  # the daemon takes the lapses (AllocatorDaemon.cycle)
+        )  # fmt: skip
     return ports, params
 
 

@@ -29,9 +29,9 @@ class CanSettings:
     map: on the allocator's side the curve it encodes with, on the vessel's the physical one
     its ESCs decode with. Allocator only: the ESC command stream's rate ``esc_rate_hz``
     (1..400 Hz; 0: no stream, one command per cycle), ``esc_hold_s`` (no allocation for
-    this long: zero) and ``esc_command_timeout_s`` (the ESCs' own timeout: no command on
-    the bus for this long and they are at zero, the allocator restarts from zero);
-    ``node_name``, what GetNodeInfo answers.
+    this long: zero; at least 2.5 of the daemon's periods) and ``esc_command_timeout_s``
+    (the ESCs' own timeout: no command on the bus for this long and they are at zero, the
+    allocator restarts from zero); ``node_name``, what GetNodeInfo answers.
     """
 
     interface: str = "canhub"

@@ -139,6 +139,9 @@ def test_the_allocator_never_asks_more_than_its_curves_give() -> None:
     assert list(ths.u_min) == pytest.approx([-0.05 * 28.6 / 36.4] * 4)
 
 
-def test_the_esc_hold_must_outlast_a_daemon_period() -> None:
-    with raises("[can] esc_hold_s: expected more than the daemon's period 0.283 s"):
-        load_daemon_config(None, ["can.esc_hold_s=0.25"])
+def test_the_esc_hold_outlasts_a_few_daemon_periods() -> None:
+    shipped = load_daemon_config(None, ["can.esc_hold_s=0.25"])  # 3.54 Hz: 0.71 s at least
+    assert shipped.ports.can.esc_hold_s == pytest.approx(2.5 * 0.2827, rel=1e-3)
+    assert load_daemon_config(None).ports.can.esc_hold_s == 1.0
+    slow = load_daemon_config(None, ["daemon.rate_hz=0.5"])
+    assert slow.ports.can.esc_hold_s == 5.0

@@ -28,6 +28,7 @@ from ftcap_hil.core.estimation import (
     Observation,
     OracleStage,
     Sample,
+    StageOutput,
     WindowedStage,
 )
 from ftcap_hil.core.estimator import (
@@ -43,6 +44,10 @@ from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.status import Mode
 from ftcap_hil.core.vessel3dof import PlantModel
+
+# A demand unmet by more than this fraction of the wrench range on an axis brings removed
+# thrusters back at their estimate for that cycle (FtcapCore._unremove_if_short).
+SHORT_FRACTION = 0.02
 
 
 @dataclass(frozen=True)
@@ -221,6 +226,7 @@ class FtcapCore:
                 u_pref = np.where(dead_ext, 0.0, u_pref)
                 probe = np.where(dead_ext, 0.0, probe)
         alloc = self.allocator.allocate(tau_d, delta, bf, self.u_prev, u_pref, probe, dt_s)
+        alloc = self._unremove_if_short(alloc, out, delta, dead_ext, tau_d, bf, u_pref, probe, dt_s)
         self.u_prev = alloc.u
         est = out.estimate
         if forced:
@@ -234,6 +240,46 @@ class FtcapCore:
             estimation_frozen=self.config.mode.estimates and w is None,
             decision=out.decision,
         )
+
+    def _unremove_if_short(
+        self,
+        alloc: Allocation,
+        out: StageOutput,
+        delta: FloatArray,
+        dead_ext: BoolArray,
+        tau_d: FloatArray,
+        bf: FloatArray,
+        u_pref: FloatArray | None,
+        probe: FloatArray | None,
+        dt_s: float | None,
+    ) -> Allocation:
+        """Removal is an economy, never a loss of authority: when the allocation without the
+        removed thrusters leaves part of the demand unmet (more than ``SHORT_FRACTION`` of the
+        wrench range on an axis), allocate again with them at their estimated effectiveness
+        and keep whichever plan meets more of the demand (scaled norm of the shortfall).
+
+        Why: a removed thruster is one whose estimate says it gives a third of its thrust or
+        less, and on two parallel thrusters one that is stuck on can make the healthy one
+        look weak. Taken out, the vessel may then have no way left to oppose the stuck
+        thrust: measured on the CyberShip II with its port propeller stuck at +2.9 N, the
+        starboard one removed and the boat pushed 46 m off station where CAP held 0.9 m.
+        Commanded at its estimate it still pushes, and its data start flowing again.
+        """
+        dec = out.decision
+        if dec is None or not dec.removed.any():
+            return alloc
+        short = np.abs(alloc.unallocated) / self.scale
+        if short.max() <= SHORT_FRACTION:
+            return alloc
+        usable = out.estimate.delta_hat >= self.config.allocator.dead_threshold
+        back = dec.removed & ~dead_ext & usable
+        if not back.any():
+            return alloc
+        restored = np.where(back, out.estimate.delta_hat, delta)
+        retry = self.allocator.allocate(tau_d, restored, bf, self.u_prev, u_pref, probe, dt_s)
+        if np.linalg.norm(retry.unallocated / self.scale) < np.linalg.norm(short):
+            return retry
+        return alloc
 
     def retune(
         self, allocator: AllocatorConfig | None = None, excitation: ExcitationConfig | None = None

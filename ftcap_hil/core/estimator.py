@@ -74,6 +74,11 @@ class EstimatorConfig:
     wave_damping: float = 0.1
     wave_force_std: tuple[float, ...] | None = None
     wave_force_rel: float = 0.3
+    # The damping model's relative error per axis as states (truth = (1 + theta) x the
+    # model's D(nu) nu): its prior standard deviation (0: no such states) and random walk
+    # (per sqrt(s)). Only for a vessel whose model gives D(nu) nu (Vessel3DOF).
+    damping_error_std: float = 0.0
+    q_damping: float = 0.001
     # Which part of the estimated bias b the allocator compensates: "attributed" (only what
     # core/decisions.py attributes to a thruster; the environment is the controller's) or
     # "all" (the paper's model: every bias is a thruster's).

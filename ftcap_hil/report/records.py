@@ -230,10 +230,26 @@ def results(records: dict[str, RunRecord]) -> dict[str, Any]:
     return out
 
 
+def json_ready(obj: Any) -> Any:
+    """``obj`` with every non-finite float (a metric that never happened, an empty run's
+    median) as None, so the file is strict JSON (RFC 8259 has no NaN or Infinity):
+    ``null`` in results.json means "never" or "not measured" (docs/results.md)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_ready(v) for v in obj]
+    return obj
+
+
 def write_results(records: dict[str, RunRecord], out_dir: Path) -> dict[str, Any]:
+    """Write each record's timeseries.csv and results.json (strict JSON: :func:`json_ready`);
+    returns the results as computed (NaN where a metric never happened)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     for name, rec in records.items():
         write_csv(rec, out_dir / name / "timeseries.csv")
     res = results(records)
-    (out_dir / "results.json").write_text(json.dumps(res, indent=2, allow_nan=True))
+    text = json.dumps(json_ready(res), indent=2, allow_nan=False)
+    (out_dir / "results.json").write_text(text)
     return res

@@ -27,13 +27,16 @@ def flight_summary_lines(res: dict[str, Any]) -> list[str]:
             f"{r.get('overruns', '?')} overruns"
         )
         for p in r["phases"]:
-            dh = " ".join(
-                "-" if e is None or not math.isfinite(e) else f"{e:.3f}"
-                for e in p["delta_error_final"]
-            )
+            dh = " ".join(_num(e) for e in p["delta_error_final"])
             lines.append(
-                f"    [{p['start']:6.1f}, {p['end']:6.1f}) s  tracking rms {p['tracking_rms']:.3f}"
-                f" max {p['tracking_max']:.3f} m  heading rms {p.get('heading_rms', math.nan):.3f}"
-                f" rad  |delta_hat - delta| at end {dh}"
+                f"    [{p['start']:6.1f}, {p['end']:6.1f}) s"
+                f"  tracking rms {_num(p['tracking_rms'])} max {_num(p['tracking_max'])} m"
+                f"  heading rms {_num(p.get('heading_rms'))} rad"
+                f"  |delta_hat - delta| at end {dh}"
             )
     return lines
+
+
+def _num(x: float | None) -> str:
+    """A metric as written in results.json (None: never / not measured) -> '-' or 0.123."""
+    return "-" if x is None or not math.isfinite(x) else f"{x:.3f}"

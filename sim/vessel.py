@@ -111,7 +111,8 @@ class VesselSim:
         self._x = np.array(config.x0, dtype=np.float64)
         self._t_s = 0.0
         self._command = np.zeros(m)
-        self._command_stamp_s = -math.inf
+        self._command_stamp_s = -math.inf  # when the command in force arrived (step split)
+        self._heard_s = -math.inf  # when it (or a repeat of it) last arrived (watchdog)
         self._delta_override = np.full(m, np.nan)  # NaN: follow the schedule
         self._f_override = np.full(m, np.nan)
         self._silent_override: list[bool | None] = [None] * m
@@ -132,14 +133,24 @@ class VesselSim:
 
     # --- inputs ---
 
-    def set_command(self, u: FloatArray, stamp_s: float) -> None:
-        """The latest thruster command (m,) N, received at ``stamp_s``; clipped to limits."""
+    def set_command(self, u: FloatArray, stamp_s: float, first_s: float | None = None) -> None:
+        """The latest thruster command (m,) N, received at ``stamp_s``; clipped to limits.
+
+        An ESC command stream re-sends a command at its own rate: a repeat of the command in
+        force only feeds the watchdog, and a new value whose first copy came at ``first_s``
+        (the receiver may only hand over its latest copy) took effect then, though not
+        before the previous command was last heard."""
         u = np.asarray(u, dtype=np.float64)
         if u.shape != (self.m,) or not np.all(np.isfinite(u)):
             raise ValueError(f"command: expected {self.m} finite forces, got {u.tolist()}")
         ths = self.config.thrusters
-        self._command = np.clip(u, ths.u_min, ths.u_max)
-        self._command_stamp_s = stamp_s
+        u = np.clip(u, ths.u_min, ths.u_max)
+        repeat = stamp_s - self._heard_s <= self.config.command_timeout_s
+        if not (repeat and np.array_equal(u, self._command)):
+            self._command = u
+            effect = stamp_s if first_s is None else min(first_s, stamp_s)
+            self._command_stamp_s = max(effect, self._heard_s)
+        self._heard_s = stamp_s
 
     def inject(self, fault: FaultInjection) -> None:
         """Apply a live injection (module docstring). ValueError for a bad index or value."""
@@ -201,7 +212,7 @@ class VesselSim:
 
     def command_age_s(self, now_s: float) -> float:
         """Seconds from the latest command's stamp to ``now_s`` (inf if none arrived)."""
-        return now_s - self._command_stamp_s
+        return now_s - self._heard_s
 
     def step(self, dt_s: float, now_s: float) -> SimSample:
         """Integrate ``dt_s`` of sim time; the watchdog compares stamps with ``now_s``."""

@@ -3,7 +3,8 @@
 Allocator side (node ``node_id``, default 10):
 
 * ``CanThrusterSink``: ``send(u)`` -> one ``esc.RawCommand`` transfer (all thrusters);
-  ``tick()`` -> own ``NodeStatus`` at 1 Hz; the loop thread calls both.
+  ``tick()`` -> own ``NodeStatus`` at 1 Hz; the loop thread calls both. With
+  ``start_stream()`` the latest command is also re-sent at the ESCs' rate (``esc_stream.py``).
 * ``CanEscStatusSource``: Notifier callback; ``esc.Status`` -> ``EscStatus`` into one
   ``Mailbox`` per thruster (``esc_index`` = thruster index). An ESC whose mailbox ages is the
   loop's to declare failed.
@@ -43,7 +44,14 @@ from bridges.can_io.codec import (
     check_node_id,
     check_node_ids,
 )
-from bridges.can_io.force_map import ForceRawMap
+from bridges.can_io.esc_stream import (
+    DEFAULT_ESC_TIMEOUT_S,
+    DEFAULT_HOLD_S,
+    DEFAULT_RATE_HZ,
+    EscCommandStream,
+)
+from bridges.can_io.force_map import ForceMap
+from bridges.can_io.node import ConflictDetector
 from bridges.can_io.ports import CanReceiver, CanSender
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import EscStatus, ThrusterCommand
@@ -58,7 +66,7 @@ class CanThrusterSink(CanSender):
     def __init__(
         self,
         bus: can.BusABC,
-        force_map: ForceRawMap,
+        force_map: ForceMap,
         *,
         node_id: int = DEFAULT_ALLOCATOR_NODE_ID,
         priority: int = PRIORITY_HIGH,
@@ -75,17 +83,51 @@ class CanThrusterSink(CanSender):
         self.health = Health.OK
         self.mode = Mode.OPERATIONAL
         self.last_raw: tuple[int, ...] | None = None
+        self.stream: EscCommandStream | None = None
+
+    def start_stream(
+        self,
+        rate_hz: float = DEFAULT_RATE_HZ,
+        hold_s: float = DEFAULT_HOLD_S,
+        *,
+        esc_timeout_s: float = DEFAULT_ESC_TIMEOUT_S,
+        restart_from_zero: bool = False,
+    ) -> EscCommandStream:
+        """Re-send the latest command every ``1 / rate_hz`` s (1..400 Hz) from a thread;
+        zero once no ``send`` came for ``hold_s`` or no command reached the bus for
+        ``esc_timeout_s`` (the ESCs' own timeout), held until the next ``send`` or, with
+        ``restart_from_zero``, until ``take_lapse()`` (``esc_stream.py``). Stopped by
+        ``shutdown()``. Once only."""
+        if self.stream is not None:
+            raise RuntimeError("CanThrusterSink: the ESC stream is already running")
+        zero = (0,) * self.force_map.m
+        self.stream = EscCommandStream(
+            self.send_raw, zero, rate_hz=rate_hz, hold_s=hold_s, esc_timeout_s=esc_timeout_s,
+            restart_from_zero=restart_from_zero,
+        )  # fmt: skip
+        return self.stream.start()
+
+    def take_lapse(self) -> bool:
+        """True if the ESCs may have dropped to zero since the last call (the stream's
+        lapse: bus down, this process stalled, or no allocation for ``hold_s``): restart the
+        command from zero. Always False without a stream."""
+        return self.stream is not None and self.stream.take_lapse()
 
     def send(self, u: Sequence[float] | np.ndarray) -> bool:
-        """Send forces ``u`` (m,) in N. Raises ``NonFiniteCommand`` for NaN/inf (nothing sent).
+        """Send forces ``u`` (m,) in N now (and hold them in the ESC stream, if running;
+        during a lapse the stream may send zero instead). Raises ``NonFiniteCommand`` for
+        NaN/inf (nothing sent, nothing held).
 
         Returns False (and marks the port stale) if the bus refused the frames.
         """
-        return self.send_raw(self.force_map.to_raw(u))
+        raw = self.force_map.to_raw(u)
+        if self.stream is not None:
+            return self.stream.update(tuple(int(v) for v in raw))
+        return self.send_raw(raw)
 
     def send_zero(self) -> bool:
         """Command zero force on every thruster (raw 0); False if the bus refused it."""
-        return self.send_raw(np.zeros(self.force_map.m, dtype=np.int64))
+        return self.send(np.zeros(self.force_map.m))
 
     def send_raw(self, raw: Sequence[int] | np.ndarray) -> bool:
         """Send raw int14 values directly (length m, clipped to +-8191 by the codec)."""
@@ -101,6 +143,10 @@ class CanThrusterSink(CanSender):
         """Health and mode reported in the next NodeStatus."""
         self.health, self.mode = health, mode
 
+    def current_status(self, node_id: int | None = None) -> NodeStatusMsg:
+        """This node's NodeStatus now (uptime, health, mode); what GetNodeInfo reports."""
+        return NodeStatusMsg(self._uptime_s(), self.health, self.mode)
+
     def tick(self, now_ns: int | None = None) -> bool:
         """Send NodeStatus if one is due (first call: now). True if one was sent."""
         if not self._status_due(now_ns):
@@ -112,9 +158,11 @@ class CanThrusterSink(CanSender):
         return self._send(msg, self.node_id, DataType.NODE_STATUS, PRIORITY_LOWEST)
 
     def _close(self) -> None:
+        if self.stream is not None:
+            self.stream.stop()
         if self._zero_on_shutdown:
             # The last writes: command zero, then announce that this node goes offline.
-            self.send_zero()
+            self.send_raw(np.zeros(self.force_map.m, dtype=np.int64))
             self._send_node_status(Mode.OFFLINE)
 
 
@@ -164,6 +212,10 @@ class CanEscStatusSink(CanSender):
     def send_all(self, statuses: Iterable[EscStatus]) -> bool:
         """Send each; True only if all went out."""
         return all([self.send(s) for s in statuses])
+
+    def current_status(self, node_id: int | None = None) -> NodeStatusMsg:
+        """A simulated ESC's NodeStatus now (uptime, health OK, operational)."""
+        return NodeStatusMsg(self._uptime_s())
 
     def tick(self, now_ns: int | None = None, indices: Iterable[int] | None = None) -> bool:
         """NodeStatus for the ESCs in ``indices`` (default all) if due. True if sent."""
@@ -253,16 +305,21 @@ class CanCommandSource(CanReceiver):
 
     ``allocator_node_id=None`` accepts commands from any node. A command whose length is not
     ``force_map.m`` is malformed. The allocator's NodeStatus lands in ``allocator_status``.
+    ``conflict`` watches the allocator's node ID for a second sender (``node.py``); while a
+    conflict is on, commands are dropped (``dropped_in_conflict``) unless
+    ``obey_in_conflict``: which sender is genuine cannot be told, and the ESC timeout then
+    stops the thrusters rather than obey a stranger.
     """
 
     def __init__(
         self,
         bus: can.BusABC,
-        force_map: ForceRawMap,
+        force_map: ForceMap,
         *,
         allocator_node_id: int | None = DEFAULT_ALLOCATOR_NODE_ID,
         notifier: can.Notifier | None = None,
         poll_timeout_s: float = 0.1,
+        obey_in_conflict: bool = False,
         owns_bus: bool = False,
     ) -> None:
         if allocator_node_id is not None:
@@ -270,8 +327,15 @@ class CanCommandSource(CanReceiver):
         self.force_map = force_map
         self._allocator = allocator_node_id
         self.commands: Mailbox[ThrusterCommand] = Mailbox("can_thruster_command")
+        # The same, put only when the value changes: stamped when a command first came, not
+        # when the ESC stream last repeated it (when it took effect on a real thruster).
+        self.changes: Mailbox[ThrusterCommand] = Mailbox("can_thruster_command_change")
         self.raw_commands: Mailbox[tuple[int, ...]] = Mailbox("can_raw_command")
+        self._last_raw: tuple[int, ...] | None = None
         self.allocator_status: Mailbox[NodeStatusMsg] = Mailbox("can_allocator_status")
+        self.conflict = None if allocator_node_id is None else ConflictDetector(allocator_node_id)
+        self._obey_in_conflict = obey_in_conflict
+        self.dropped_in_conflict = 0
         super().__init__(
             bus,
             owns_bus,
@@ -285,16 +349,24 @@ class CanCommandSource(CanReceiver):
         if self._allocator is not None and got.source_node_id != self._allocator:
             return
         msg = got.message
+        in_conflict = self.conflict is not None and self.conflict.observe(got, now_ns)
         if isinstance(msg, NodeStatusMsg):
             self.allocator_status.put(msg, now_ns)
         elif isinstance(msg, RawCommandMsg):
+            if in_conflict and not self._obey_in_conflict:
+                self.dropped_in_conflict += 1
+                return
             if len(msg.raw) != self.force_map.m:
                 raise MalformedMessage(
                     f"RawCommand: {len(msg.raw)} values for {self.force_map.m} thrusters"
                 )
             u = self.force_map.to_force(msg.raw)
+            command = ThrusterCommand.checked(u, self.force_map.m)
             self.raw_commands.put(msg.raw, now_ns)
-            self.commands.put(ThrusterCommand.checked(u, self.force_map.m), now_ns)
+            if msg.raw != self._last_raw:
+                self._last_raw = msg.raw
+                self.changes.put(command, now_ns)
+            self.commands.put(command, now_ns)
 
     def _count_malformed(self) -> None:
         self.commands.count_malformed()

@@ -24,6 +24,7 @@ from bridges.can_io.codec import (
     TransferAssembler,
     TransferIds,
     encode,
+    with_transfer_id,
 )
 from ftcap_hil.core.errors import MalformedMessage
 
@@ -91,17 +92,19 @@ class CanSender(CanPort):
         self._next_status_ns: int | None = None
         self.transfers_sent = 0
         self.send_errors = 0
+        self._last_encoded: tuple[tuple[Message, int, int], list[CanFrame]] | None = None
 
     def _send(self, msg: Message, node_id: int, data_type: DataType, priority: int) -> bool:
         with self._lock:
             if self._closed:
                 return False
-            frames = encode(
-                msg,
-                source_node_id=node_id,
-                transfer_id=self._tids.next(node_id, data_type),
-                priority=priority,
-            )
+            tid = self._tids.next(node_id, data_type)
+            key = (msg, node_id, priority)
+            if self._last_encoded is not None and self._last_encoded[0] == key:
+                frames = with_transfer_id(self._last_encoded[1], tid)  # a repeat: no DSDL work
+            else:
+                frames = encode(msg, source_node_id=node_id, transfer_id=tid, priority=priority)
+                self._last_encoded = (key, frames)
             try:
                 for f in frames:
                     self.bus.send(
@@ -164,6 +167,18 @@ class CanReceiver(CanPort, can.Listener):
         self._own_notifier = notifier is None
         self._notifier = notifier if notifier is not None else can.Notifier(bus, [], poll_timeout_s)
         self._notifier.add_listener(self)
+
+    @property
+    def notifier(self) -> can.Notifier:
+        """The Notifier this receiver listens on: give it to other listeners of the bus
+        (python-can allows one Notifier per bus)."""
+        return self._notifier
+
+    @property
+    def assembler(self) -> TransferAssembler:
+        """The reassembler, for its counters (``pending``, ``orphans``, ``expired``,
+        ``evicted``)."""
+        return self._assembler
 
     def on_message_received(self, msg: can.Message) -> None:
         """python-can callback (Notifier thread): reassemble, decode, hand to ``_handle``;

@@ -135,9 +135,15 @@ def encode_wrench_setpoint(msg: WrenchSetpoint) -> bytes:
     return dump(wrench_obj("wrench", msg.tau))
 
 
-def decode_wrench_setpoint(payload: bytes | str) -> WrenchSetpoint:
-    """The wrench of a ``setpoint/wrench`` payload; MalformedMessage if invalid."""
-    return WrenchSetpoint(wrench(load(payload)))
+def decode_wrench_setpoint(
+    payload: bytes | str, limit: tuple[float, float, float] | None = None
+) -> WrenchSetpoint:
+    """The wrench of a ``setpoint/wrench`` payload; MalformedMessage if invalid or, with
+    ``limit`` (N, N, N*m), if a component exceeds it in magnitude (a sanity bound)."""
+    tau = wrench(load(payload))
+    if limit is not None and np.any(np.abs(tau) > np.asarray(limit)):
+        raise MalformedMessage(f"wrench {tau.tolist()} beyond the limit +-{list(limit)}")
+    return WrenchSetpoint(tau)
 
 
 def encode_odometry(msg: Odometry) -> bytes:

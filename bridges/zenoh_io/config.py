@@ -40,7 +40,7 @@ from ftcap_hil.core.errors import ConfigError
 
 DEFAULT_PORT = 7447
 LOOPBACK = "127.0.0.1"
-SHIPPED_CONFIGS = ("allocator", "vessel", "gcs")
+SHIPPED_CONFIGS = ("allocator", "vessel", "gcs", "allocator-tls", "vessel-tls", "gcs-tls")
 CHECKED_KEYS = (
     "mode",
     "listen/endpoints",
@@ -77,6 +77,9 @@ def role_settings(
 
     A router listens on ``tcp/host:port``; a client or peer connects there and listens nowhere.
     Gossip is off too: every session talks to the one router, so there is nothing to gossip.
+    Shared memory is off: the payloads are small JSON, and each session that joins a router
+    over shared memory maps a segment there that stays resident after it leaves (about
+    20 MB per client session on loopback).
     """
     role = _role(role, "role")
     here = json.dumps([endpoint(host, port)])
@@ -84,6 +87,7 @@ def role_settings(
         "mode": json.dumps(role.value),
         "scouting/multicast/enabled": "false",
         "scouting/gossip/enabled": "false",
+        "transport/shared_memory/enabled": "false",
     }
     if role is ZenohRole.ROUTER:
         settings |= {"listen/endpoints": here, "connect/endpoints": "[]"}

@@ -4,7 +4,9 @@ Writers turn our values into JSON-ready fields and refuse what JSON must not car
 take one field of a decoded payload and raise :class:`~ftcap_hil.core.errors.MalformedMessage`
 for anything wrong: a missing field, a wrong type (``true`` is not a number), a wrong length,
 NaN/Infinity, an out-of-range value. :func:`load` also refuses a payload that is not a UTF-8
-JSON object, has another ``"v"`` than :data:`VERSION`, or exceeds :data:`MAX_PAYLOAD_BYTES`.
+JSON object, has another ``"v"`` than :data:`VERSION`, exceeds :data:`MAX_PAYLOAD_BYTES`, or
+holds an integer literal of more than :data:`MAX_INT_DIGITS` digits (no field needs one, and
+converting a long one costs time and then overflows a float).
 The payloads themselves are in :mod:`bridges.zenoh_io.codec`.
 """
 
@@ -22,6 +24,7 @@ from ftcap_hil.core.messages import FloatArray, finite_vector
 
 VERSION = 1
 MAX_PAYLOAD_BYTES = 65536
+MAX_INT_DIGITS = 18  # every integer field fits: int64 has 19 digits, a float 15-17
 WRENCH_FIELDS = ("X_N", "Y_N", "N_Nm")
 
 
@@ -60,8 +63,8 @@ def load(payload: bytes | bytearray | memoryview | str) -> dict[str, Any]:
         raise MalformedMessage(f"payload of {len(payload)} bytes > {MAX_PAYLOAD_BYTES}")
     try:
         text = payload if isinstance(payload, str) else bytes(payload).decode("utf-8")
-        obj = json.loads(text, parse_constant=_reject_constant)
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
+        obj = json.loads(text, parse_constant=_reject_constant, parse_int=_parse_int)
+    except (UnicodeDecodeError, ValueError, RecursionError) as e:  # JSONDecodeError too
         raise MalformedMessage(f"not a JSON payload: {e}") from e
     if not isinstance(obj, dict):
         raise MalformedMessage(f"expected a JSON object, got {type(obj).__name__}")
@@ -72,6 +75,12 @@ def load(payload: bytes | bytearray | memoryview | str) -> dict[str, Any]:
 
 def _reject_constant(name: str) -> float:
     raise MalformedMessage(f"non-finite constant {name} in payload")
+
+
+def _parse_int(literal: str) -> int:
+    if len(literal.lstrip("-")) > MAX_INT_DIGITS:
+        raise MalformedMessage(f"integer literal of {len(literal)} characters in payload")
+    return int(literal)
 
 
 def get_field(obj: Mapping[str, Any], key: str) -> Any:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 
 import zenoh
 
@@ -75,6 +76,8 @@ class ZenohAllocatorLink(ZenohLink):
     callbacks; pass your own to share them with the loop. The queryable on
     ``allocator/state`` answers with the last snapshot (``publish_status`` or
     ``set_status_snapshot``), or with an error reply before the first one.
+    ``wrench_limit`` (N, N, N*m): setpoints with a component beyond +-this are dropped as
+    malformed, the sanity bound MAVLink's ``wrench_limit`` applies (None: no bound).
     """
 
     _shipped = "allocator"
@@ -86,14 +89,17 @@ class ZenohAllocatorLink(ZenohLink):
         *,
         setpoints: Mailbox[WrenchSetpoint] | None = None,
         odometry: Mailbox[Odometry] | None = None,
+        wrench_limit: tuple[float, float, float] | None = None,
     ) -> None:
+        self.wrench_limit = _check_limit(wrench_limit)
         super().__init__(vessel, config)
         self.setpoints = setpoints if setpoints is not None else Mailbox("setpoint")
         self.odometry = odometry if odometry is not None else Mailbox("odometry")
         self.queries_answered = 0
         self._snapshot: bytes | None = None
         k = self.keys
-        self._subscribe(k.setpoint_wrench, decode_wrench_setpoint, self.setpoints)
+        decode_setpoint = functools.partial(decode_wrench_setpoint, limit=self.wrench_limit)
+        self._subscribe(k.setpoint_wrench, decode_setpoint, self.setpoints)
         self._subscribe(k.odometry, decode_odometry, self.odometry)
         self._declare_publisher(k.thruster_command, urgent=True)
         self._declare_publisher(k.status)
@@ -130,6 +136,15 @@ class ZenohAllocatorLink(ZenohLink):
                     self.queries_answered += 1
             except zenoh.ZError as e:
                 log.debug("%s: reply failed: %s", self.keys.state, e)
+
+
+def _check_limit(limit: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+    if limit is None:
+        return None
+    values = tuple(float(v) for v in limit)
+    if len(values) != 3 or not all(math.isfinite(v) and v > 0.0 for v in values):
+        raise ValueError(f"zenoh.wrench_limit: expected 3 finite values > 0, got {limit!r}")
+    return (values[0], values[1], values[2])
 
 
 class ZenohVesselLink(ZenohLink):
@@ -215,7 +230,7 @@ class ZenohGcsLink(ZenohLink):
                     continue
                 try:
                     return decode_status(reply.ok.payload.to_bytes())
-                except MalformedMessage as e:
+                except (MalformedMessage, ValueError, TypeError, OverflowError) as e:
                     self.status.count_malformed()
                     log.warning("%s: malformed reply dropped: %s", self.keys.state, e)
         except zenoh.ZError as e:

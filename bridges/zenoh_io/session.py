@@ -46,6 +46,7 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 T_contra = TypeVar("T_contra", contravariant=True)
 JSON_ENCODING = zenoh.Encoding.APPLICATION_JSON
+LOG_INTERVAL_S = 5.0  # at most one failing/working line per port and interval
 
 
 class ZenohLinkError(PortError):
@@ -165,9 +166,11 @@ class ZenohLink:
         else:
             validate_config(config, f"{type(self).__name__} config")
         self.publish_errors = 0
+        self.decode_errors = 0  # samples a decoder failed on with other than MalformedMessage
         self._entities: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._failing: set[str] = set()  # ports whose last message failed: log transitions only
+        self._log_state: dict[str, tuple[int | None, int]] = {}  # key -> (last line, not logged)
         self._closed = False
         self._close_lock = threading.Lock()
         try:
@@ -185,6 +188,14 @@ class ZenohLink:
             except MalformedMessage as e:
                 sink.count_malformed()
                 self._transition(key, failed=True, detail=f"dropped malformed sample: {e}")
+                return
+            except Exception as e:  # noqa: BLE001 - a callback must never raise into zenoh
+                # A decoder bug, not the sender's: still counted and dropped, never a
+                # traceback per sample; the type is named once (log on transition).
+                sink.count_malformed()
+                self.decode_errors += 1
+                detail = f"dropped undecodable sample ({type(e).__name__}: {e!s:.120})"
+                self._transition(key, failed=True, detail=detail)
                 return
             sink.put(value)
             if key in self._failing:
@@ -234,14 +245,25 @@ class ZenohLink:
         self._transition(key, failed=True, detail=detail)
 
     def _transition(self, key: str, *, failed: bool, detail: str) -> None:
-        if failed and key not in self._failing:
-            self._failing.add(key)
-            log.warning("%s: %s", key, detail)
-        elif not failed and key in self._failing:
-            self._failing.discard(key)
-            log.info("%s: %s", key, detail)
-        else:
+        """Log a port's change between failing and working; a port that keeps flipping
+        (valid and malformed samples interleaved) logs at most once per
+        :data:`LOG_INTERVAL_S`, the next line saying how many changes it did not log."""
+        if failed == (key in self._failing):
             log.debug("%s: %s", key, detail)
+            return
+        if failed:
+            self._failing.add(key)
+        else:
+            self._failing.discard(key)
+        now = time.monotonic_ns()
+        last, quiet = self._log_state.get(key, (None, 0))
+        if last is not None and now - last < LOG_INTERVAL_S * 1e9:
+            self._log_state[key] = (last, quiet + 1)
+            log.debug("%s: %s", key, detail)
+            return
+        self._log_state[key] = (now, 0)
+        more = f" ({quiet} changes not logged since the last line)" if quiet else ""
+        (log.warning if failed else log.info)("%s: %s%s", key, detail, more)
 
     def subscribers_matched(self, key: str | None = None, timeout_s: float = 0.0) -> bool:
         """True once the publisher on ``key`` (None: every publisher of this link) has a

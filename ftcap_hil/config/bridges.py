@@ -2,9 +2,12 @@
 ``[zenoh]`` -> :class:`~ftcap_hil.runtime.port_settings.PortSettings`.
 
 Same keys in both files except where the role differs: the allocator's ``[can]`` has
-``node_id`` (its own node) and ``esc_monitor``, the vessel's ``allocator_node_id`` (the only
-node it accepts commands from) and ``start_hub``; the allocator's ``[mavlink]`` has
-``max_wrench`` and ``wrench_limit``. ``[zenoh] config`` is a JSON5 file or the name of a
+``node_id`` (its own node), ``node_name``, ``esc_monitor`` and the ESC command stream's
+``esc_rate_hz`` (0: no stream), ``esc_hold_s``, ``esc_command_timeout_s``; the vessel's
+``allocator_node_id`` (the only node it accepts commands from) and ``start_hub``; both
+``thruster_curve`` and ``curve_thrust_max_n`` (:mod:`ftcap_hil.config.thruster_curves`).
+The allocator's ``[mavlink]`` has ``max_wrench`` and ``wrench_limit``, its ``[zenoh]``
+``wrench_limit`` (default 1000 per component). ``[zenoh] config`` is a JSON5 file or the name of a
 shipped one (``allocator``, ``vessel``, ``gcs``), checked when the session opens
 (:mod:`bridges.zenoh_io.config`).
 """
@@ -13,9 +16,10 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ftcap_hil.config.tables import Table
+from ftcap_hil.config.thruster_curves import curves_from
 from ftcap_hil.runtime.port_settings import (
     CanSettings,
     MavlinkSettings,
@@ -29,6 +33,9 @@ if TYPE_CHECKING:
 # The bridges' pure config modules are imported when a file is read, not when ``ftcap-hil``
 # builds its parser (tests/unit/test_sim_vessel.py: the CLI imports no bridge).
 NODE_IDS = (1, 127)  # DroneCAN node IDs (0 is anonymous)
+# Zenoh setpoints with a component beyond this are garbage, dropped as malformed (MAVLink's
+# shipped wrench_limit): always bounded, a file may only choose the bound.
+DEFAULT_WRENCH_LIMIT = (1000.0, 1000.0, 1000.0)
 
 
 ENDPOINT_KEYS = (
@@ -94,11 +101,11 @@ def zenoh_config_path(t: Table, default: str) -> Path:
     raise t.error("config", f"{name!r}: no such file, nor a shipped config ({shipped})")
 
 
-def _zenoh(t: Table, default_config: str) -> ZenohSettings | None:
+def _zenoh(t: Table, default_config: str, allocator: bool) -> ZenohSettings | None:
     from bridges.zenoh_io.config import ZenohConfigError, parse_override
 
     if not t.boolean("enabled", True):
-        t.allow("vessel", "config", "connect", "overrides")
+        t.allow("vessel", "config", "connect", "overrides", *(("wrench_limit",) * allocator))
         return None
     path = zenoh_config_path(t, default_config)
     overrides = list(t.strings("overrides", ()))
@@ -112,17 +119,22 @@ def _zenoh(t: Table, default_config: str) -> ZenohSettings | None:
         connect = t.strings("connect") if isinstance(raw, list) else (t.string("connect"),)
         overrides.insert(0, f"connect/endpoints:{json.dumps(list(connect))}")
     t.allow("connect")
-    return ZenohSettings(t.string("vessel", "ftcap1"), path, tuple(overrides))
+    limit = None
+    if allocator:
+        lx, ly, ln = t.vector("wrench_limit", 3, DEFAULT_WRENCH_LIMIT, positive=True)
+        limit = (float(lx), float(ly), float(ln))
+    return ZenohSettings(t.string("vessel", "ftcap1"), path, tuple(overrides), limit)
 
 
 def _can(t: Table, m: int, allocator: bool) -> CanSettings:
     lo, hi = NODE_IDS
     interface = t.string("interface", "canhub")
+    extra: dict[str, Any]
     if allocator:
         node = t.integer("node_id", 10, lo=lo, hi=hi)
         ids = t.integers("esc_node_ids", m, lo=lo, hi=hi) if t.has("esc_node_ids") else None
         t.allow("esc_node_ids")
-        extra = {"esc_monitor": t.boolean("esc_monitor", True)}
+        extra = {"esc_monitor": t.boolean("esc_monitor", True), **_esc_stream(t)}
     else:
         node = t.integer("allocator_node_id", 10, lo=lo, hi=hi)
         ids = t.integers("esc_node_ids", m, [20 + i for i in range(m)], lo=lo, hi=hi)
@@ -131,14 +143,35 @@ def _can(t: Table, m: int, allocator: bool) -> CanSettings:
             raise t.error("start_hub", f"true needs interface 'canhub', got {interface!r}")
     if ids is not None and len(set(ids)) != len(ids):
         raise t.error("esc_node_ids", f"expected distinct node IDs, got {list(ids)}")
+    t.allow("curve_thrust_max_n")
     return CanSettings(
         interface=interface,
         channel=t.string("channel", "127.0.0.1:29536"),
         node_id=node,
         esc_node_ids=ids,
         deadband_n=t.number("deadband_n", 0.0, lo=0.0),
+        curves=curves_from(t, m),
         **extra,
     )
+
+
+def _esc_stream(t: Table) -> dict[str, Any]:
+    """The allocator's ESC command stream and node keys (``CanSettings``)."""
+    from bridges.can_io.esc_stream import check_rate
+
+    rate = t.number("esc_rate_hz", 100.0, lo=0.0)  # 0: no stream, one command per cycle
+    hold = t.number("esc_hold_s", 1.0, positive=True)
+    timeout = t.number("esc_command_timeout_s", 0.2, positive=True)
+    try:
+        if rate != 0.0:
+            check_rate(rate, hold, timeout)
+    except ValueError as e:
+        raise t.error(None, str(e)) from e
+    name = t.string("node_name", "org.ftcap.allocator")
+    if not 1 <= len(name) <= 80 or not name.isascii():
+        raise t.error("node_name", f"expected 1..80 ASCII characters, got {name!r}")
+    return {"esc_rate_hz": rate, "esc_hold_s": hold, "esc_command_timeout_s": timeout,
+            "node_name": name}  # fmt: skip
 
 
 def allocator_ports_from(root: Table, m: int) -> PortSettings:
@@ -146,7 +179,7 @@ def allocator_ports_from(root: Table, m: int) -> PortSettings:
     return PortSettings(
         _can(root.table("can"), m, allocator=True),
         _mavlink(root.table("mavlink"), allocator=True),
-        _zenoh(root.table("zenoh"), "allocator.json5"),
+        _zenoh(root.table("zenoh"), "allocator.json5", allocator=True),
     )
 
 
@@ -155,5 +188,5 @@ def vessel_ports_from(root: Table, m: int) -> PortSettings:
     return PortSettings(
         _can(root.table("can"), m, allocator=False),
         _mavlink(root.table("mavlink"), allocator=False),
-        _zenoh(root.table("zenoh"), "vessel.json5"),
+        _zenoh(root.table("zenoh"), "vessel.json5", allocator=False),
     )

@@ -9,13 +9,14 @@ The shipped defaults are ``ftcap_hil/data/hil/allocator.toml``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ftcap_hil.config.bridges import allocator_ports_from
 from ftcap_hil.config.scenario import core_config_from
 from ftcap_hil.config.tables import Table
+from ftcap_hil.config.thruster_curves import limited_to_curves
 from ftcap_hil.config.toml import HIL_DATA, read_toml
 from ftcap_hil.config.vessel import surface_vessel_from
 from ftcap_hil.core.status import Mode
@@ -57,6 +58,9 @@ def daemon_config_from(root: Table) -> DaemonConfig:
     )
 
 
+HOLD_PERIODS = 2.5  # the ESC stream's hold, at least, in the daemon's deadline periods
+
+
 def load_daemon_config(path: str | Path | None, overrides: list[str] | None = None) -> LoadedConfig:
     """A TOML file (or the shipped ``allocator.toml`` when path is None) plus overrides;
     every table and key checked (an unknown one is a ConfigError naming file, table, key)."""
@@ -64,4 +68,10 @@ def load_daemon_config(path: str | Path | None, overrides: list[str] | None = No
     with Table.document(doc) as root:
         daemon = daemon_config_from(root)
         ports = allocator_ports_from(root, daemon.thrusters.m)
+    # A hold shorter than the loop's deadline period would zero the thrusters between
+    # every two cycles: it lasts at least HOLD_PERIODS of them.
+    hold = max(ports.can.esc_hold_s, HOLD_PERIODS / daemon.rate_hz)
+    ports = replace(ports, can=replace(ports.can, esc_hold_s=hold))
+    # The allocator knows its thrusters' curves: it never asks for more than they can give.
+    daemon = replace(daemon, thrusters=limited_to_curves(daemon.thrusters, ports.can.curves))
     return LoadedConfig(daemon, doc.data, doc.source, ports)

@@ -14,10 +14,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import EscStatus
+from ftcap_hil.core.status import AllocatorStatus, Severity
 from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
 from ftcap_hil.runtime.daemon import DaemonConfig, Ports
-from ftcap_hil.runtime.port_settings import PortSettings
+from ftcap_hil.runtime.port_settings import CanSettings, PortSettings
 
 
 class AllocatorSettings(Protocol):
@@ -33,21 +35,59 @@ class AllocatorSettings(Protocol):
 
 
 def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, Any]:
-    """The CAN bus, the thruster sink on it (zero on close) and the ESC status source
-    (None with ``[can] esc_monitor = false``)."""
+    """The CAN bus, the thruster sink on it (zero on close; its ESC command stream is
+    started by ``build_ports``), the ESC status source (None with ``[can] esc_monitor =
+    false``) and the node's GetNodeInfo server."""
     from bridges.can_io.adapters import CanEscStatusSource, CanThrusterSink
     from bridges.can_io.bus import open_can_bus
-    from bridges.can_io.force_map import ForceRawMap
 
     c = cfg.ports.can
     ths = cfg.daemon.thrusters
     bus = stack.enter_context(open_can_bus(c.interface, c.channel))
-    fmap = ForceRawMap.from_limits(ths.u_min, ths.u_max, c.deadband_n)
-    sink = stack.enter_context(CanThrusterSink(bus, fmap, node_id=c.node_id, zero_on_shutdown=True))
+    sink = CanThrusterSink(bus, _force_map(c, ths), node_id=c.node_id, zero_on_shutdown=True)
+    stack.enter_context(sink)
     esc = None
     if c.esc_monitor:
         esc = stack.enter_context(CanEscStatusSource(bus, ths.m, esc_node_ids=c.esc_node_ids))
+    _serve_node_info(c, bus, sink, None if esc is None else esc.notifier, stack)
     return sink, esc
+
+
+def _force_map(c: CanSettings, ths: ThrusterSet) -> Any:
+    """The curves' map if ``[can]`` names thruster curves, else the linear one."""
+    from bridges.can_io.force_map import CurveForceMap, ForceRawMap
+
+    if c.curves is not None:
+        return CurveForceMap.create(c.curves, c.deadband_n)
+    return ForceRawMap.from_limits(ths.u_min, ths.u_max, c.deadband_n)
+
+
+def _serve_node_info(
+    c: CanSettings, bus: Any, sink: Any, notifier: Any, stack: contextlib.ExitStack
+) -> None:
+    """Answer GetNodeInfo as ``c.node_name`` (on the ESC source's notifier: one per bus)."""
+    from bridges.can_io.node import CanNodeServer, NodeInfo, unique_id_for
+
+    info = NodeInfo(c.node_name, unique_id=unique_id_for(c.node_name, c.node_id))
+    server = CanNodeServer(bus, {c.node_id: info}, sink.current_status, notifier=notifier)
+    stack.callback(server.shutdown)
+
+
+class NodeHealthSink:
+    """The allocator's DroneCAN NodeStatus health and mode follow its status
+    (``bridges.can_io.node.health_for``: WARNING when a thruster is flagged, ERROR when the
+    allocation is degraded or an ESC is silent)."""
+
+    def __init__(self, sink: Any) -> None:
+        from bridges.can_io.node import health_for, mode_for
+
+        self._sink, self._health_for, self._mode_for = sink, health_for, mode_for
+
+    def publish(self, status: AllocatorStatus) -> None:
+        self._sink.set_status(self._health_for(status), self._mode_for(status))
+
+    def announce(self, text: str, severity: Severity) -> None:
+        """NodeStatus carries no text."""
 
 
 def _latest_of(esc: Any) -> Callable[[], list[EscStatus | None]]:
@@ -65,17 +105,25 @@ def build_ports(
     cmd_log: CommandLog | None,
 ) -> tuple[Ports, Any]:
     """The daemon's ports from ``cfg``'s [can], [mavlink] and [zenoh] tables, and the
-    MAVLink parameter server (None without MAVLink)."""
+    MAVLink parameter server (None without MAVLink). The ESC command stream (unless
+    ``esc_rate_hz = 0``) re-sends the latest command from here on."""
     sink, esc = open_can(cfg, stack)
     ports = Ports(
         setpoints=[],
         telemetry=[],
         thrusters=LoggedSink(sink, cfg.daemon.thrusters.m, cmd_log),
+        status=[NodeHealthSink(sink)],
         esc_ages=esc.ages_s if esc is not None else None,
         esc_latest=_latest_of(esc) if esc is not None else None,
     )
     params = open_mavlink(cfg, stack, ports)
     open_zenoh(cfg, stack, ports)
+    c = cfg.ports.can
+    if c.esc_rate_hz > 0.0:  # last: opening the others must not stall its first ticks
+        sink.start_stream(
+            c.esc_rate_hz, c.esc_hold_s, esc_timeout_s=c.esc_command_timeout_s,
+            restart_from_zero=True,  # the daemon takes the lapses (AllocatorDaemon.cycle)
+        )  # fmt: skip
     return ports, params
 
 
@@ -125,7 +173,9 @@ def open_zenoh(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports
     from bridges.zenoh_io.status import ZenohStatusSink
 
     conf = zenoh_link.load_config(z_cfg.config, list(z_cfg.overrides))
-    zl = stack.enter_context(zenoh_link.ZenohAllocatorLink(z_cfg.vessel, conf))
+    zl = stack.enter_context(
+        zenoh_link.ZenohAllocatorLink(z_cfg.vessel, conf, wrench_limit=z_cfg.wrench_limit)
+    )
     ports.setpoints.append(zl.setpoints)
     ports.telemetry.append(zl.odometry)
     ports.status.append(ZenohStatusSink(zl))

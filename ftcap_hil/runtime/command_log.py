@@ -49,3 +49,6 @@ class LoggedSink:
 
     def tick(self, now_ns: int | None = None) -> object:
         return self._inner.tick(now_ns)
+
+    def take_lapse(self) -> bool:
+        return bool(self._inner.take_lapse())

@@ -59,11 +59,14 @@ _SINK_ERRORS = (ValueError, OverflowError, TypeError, OSError, RuntimeError)
 
 
 class ThrusterSink(Protocol):
-    """Where commands go: ``u`` (m,) in N; False if the bus refused it."""
+    """Where commands go: ``u`` (m,) in N; False if the bus refused it. ``take_lapse``:
+    True if the thrusters may have dropped to zero since the last call (their command
+    stream lapsed: bus down, this process stalled), so the core restarts from zero."""
 
     def send(self, u: FloatArray) -> bool: ...
     def send_zero(self) -> bool: ...
     def tick(self, now_ns: int | None = None) -> Any: ...
+    def take_lapse(self) -> bool: ...
 
 
 class StatusSink(Protocol):
@@ -143,6 +146,7 @@ class AllocatorDaemon:
                 box.notify = self.loop.wake_event
         self.cycles = 0
         self.not_sent = 0  # commands the sink refused (bus errors)
+        self.lapses = 0  # lapses of the thrusters' command stream (restarts from zero)
         self.transitions = TransitionLog(self._announce)
         self.esc_watchdog = EscWatchdog(self.transitions)
         self.sampler = EstimationSampler(config.estimation_period_s, config.vessel_clock)
@@ -222,6 +226,7 @@ class AllocatorDaemon:
         fresh = self._freshness(now, sp_stamp, tel_stamp)
         sample = None if fresh.telemetry_stale else self.sampler.sample(odom, tel_stamp)
         result = None
+        self._restart_after_lapse()
         if fresh.setpoint_stale:
             self._tau_d = np.zeros(self.core.k)
             self._send(np.zeros(self.core.m), now, started)
@@ -243,6 +248,20 @@ class AllocatorDaemon:
             self._last_status_ns = now
             self._publish(now, fresh)
         return result
+
+    def _restart_after_lapse(self) -> None:
+        """After a lapse the ESCs hold zero (their own timeout), not ``u_prev``: the core's
+        rate-limited ramp restarts from what they actually have."""
+        lapsed = self.ports.thrusters.take_lapse()  # True on every cycle of a bus outage
+        if lapsed:
+            self.core.reset_command()
+        if self.transitions.update(
+            "command_lapse",
+            lapsed,
+            "thruster commands lapsed (the ESCs are at zero): restarting from zero",
+            "thruster commands reach the ESCs again",
+        ):
+            self.lapses += lapsed
 
     def _telemetry(self) -> tuple[Odometry | None, int]:
         """The newest odometry over the telemetry ports (by vessel time, not by receipt:

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ftcap_hil.core.thruster_curve import ThrusterCurve
+
 if TYPE_CHECKING:  # the CLI builds its parser without importing any bridge
     from bridges.mavlink.config import MavlinkEndpoint
 
@@ -22,6 +24,14 @@ class CanSettings:
     accepts esc.Status from any node). ``deadband_n``: forces with ``|u|`` at most this (N)
     are sent as raw 0. ``esc_monitor`` (allocator): watch esc.Status; ``start_hub``
     (vessel): also run the ``canhub`` on ``channel``.
+
+    ``curves``: one thruster curve per thruster (force <-> command), None for the linear
+    map: on the allocator's side the curve it encodes with, on the vessel's the physical one
+    its ESCs decode with. Allocator only: the ESC command stream's rate ``esc_rate_hz``
+    (1..400 Hz; 0: no stream, one command per cycle), ``esc_hold_s`` (no allocation for
+    this long: zero; at least 2.5 of the daemon's periods) and ``esc_command_timeout_s``
+    (the ESCs' own timeout: no command on the bus for this long and they are at zero, the
+    allocator restarts from zero); ``node_name``, what GetNodeInfo answers.
     """
 
     interface: str = "canhub"
@@ -31,6 +41,11 @@ class CanSettings:
     deadband_n: float = 0.0
     esc_monitor: bool = True
     start_hub: bool = False
+    curves: tuple[ThrusterCurve, ...] | None = None
+    esc_rate_hz: float = 100.0
+    esc_hold_s: float = 1.0
+    esc_command_timeout_s: float = 0.2
+    node_name: str = "org.ftcap.allocator"
 
 
 @dataclass(frozen=True)
@@ -47,11 +62,13 @@ class MavlinkSettings:
 @dataclass(frozen=True)
 class ZenohSettings:
     """``[zenoh]`` of an enabled session: the vessel name in the key expressions, the JSON5
-    file and the ``KEY:VALUE`` overrides applied to it (in order)."""
+    file and the ``KEY:VALUE`` overrides applied to it (in order); for the allocator
+    ``wrench_limit`` (setpoints with a component beyond it are dropped as malformed)."""
 
     vessel: str
     config: Path
     overrides: tuple[str, ...] = ()
+    wrench_limit: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -105,6 +105,7 @@ class VesselPorts:
         self._stack = contextlib.ExitStack()
         self._injection_enabled = injection_enabled
         self.commands: Any = None  # Mailbox[ThrusterCommand] of the CanCommandSource
+        self.changes: Any = None  # its changes only (stamped at a value's first arrival)
         self.esc_sink: Any = None
         self.mavlink: Any = None
         self.zenoh: Any = None
@@ -127,7 +128,7 @@ class VesselPorts:
     def _open_can(self, c: CanSettings, ths: ThrusterSet) -> None:
         from bridges.can_io.adapters import CanCommandSource, CanEscStatusSink
         from bridges.can_io.bus import CanBusError, open_can_bus
-        from bridges.can_io.force_map import ForceRawMap
+        from bridges.can_io.force_map import CurveForceMap, ForceRawMap
         from bridges.can_io.hub import CanHub, parse_channel
 
         ids = c.esc_node_ids if c.esc_node_ids is not None else [20 + i for i in range(ths.m)]
@@ -137,7 +138,11 @@ class VesselPorts:
                 self._stack.callback(CanHub(host, port).start().shutdown)
             bus = open_can_bus(c.interface, c.channel)
             self._stack.callback(bus.shutdown)
-            force_map = ForceRawMap.from_limits(ths.u_min, ths.u_max, c.deadband_n)
+            force_map: Any = (  # the physical curves: a wrong map in the allocator shows
+                ForceRawMap.from_limits(ths.u_min, ths.u_max, c.deadband_n)
+                if c.curves is None
+                else CurveForceMap.create(c.curves, c.deadband_n)
+            )
             source = CanCommandSource(bus, force_map, allocator_node_id=c.node_id)
             self._stack.callback(source.shutdown)
             self.esc_sink = CanEscStatusSink(bus, ids)
@@ -146,7 +151,7 @@ class VesselPorts:
             raise PortError(f"can: {e}") from e
         except (ValueError, TypeError) as e:
             raise ConfigError(f"can: {e}") from e
-        self.commands = source.commands
+        self.commands, self.changes = source.commands, source.changes
 
     def _open_mavlink(self, c: MavlinkSettings, m: int) -> None:
         from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
@@ -170,6 +175,15 @@ class VesselPorts:
 
     def latest_command(self) -> Stamped[ThrusterCommand] | None:
         return None if self.commands is None else self.commands.latest()
+
+    def first_arrival_ns(self, command: Stamped[ThrusterCommand]) -> int:
+        """When ``command``'s value first arrived (before the ESC stream's repeats of it):
+        its own stamp unless the latest change is that value and not newer."""
+        change = None if self.changes is None else self.changes.latest()
+        if change is None or change.stamp_ns > command.stamp_ns:
+            return command.stamp_ns
+        same = np.array_equal(change.value.u, command.value.u)
+        return change.stamp_ns if same else command.stamp_ns
 
     def drain_faults(self) -> list[tuple[str, Stamped[FaultInjection]]]:
         """Injections from every source, oldest first, as (source name, injection)."""
@@ -255,7 +269,8 @@ class VesselProcess:
         slot = self.ports.latest_command()
         if slot is not None and slot.stamp_ns != self._command_stamp:
             self._command_stamp = slot.stamp_ns
-            self.sim.set_command(slot.value.u, slot.stamp_ns * 1e-9)
+            first = self.ports.first_arrival_ns(slot)
+            self.sim.set_command(slot.value.u, slot.stamp_ns * 1e-9, first * 1e-9)
         for source, fault in self.ports.drain_faults():
             self._inject(source, fault)
         sample = self.sim.step(self._elapsed_s(now_ns), now_ns * 1e-9)

@@ -28,6 +28,7 @@ from bridges.can_io.codec import (
     decode_frames,
     encode,
     encode_raw_command,
+    with_transfer_id,
 )
 from bridges.can_io.force_map import RAW_MAX, ForceRawMap, NonFiniteCommand
 from ftcap_hil.core.errors import MalformedMessage
@@ -244,3 +245,65 @@ def test_force_map_config_errors_name_the_key(u_max: list[float], dead: float, k
 def test_force_map_wrong_length() -> None:
     with pytest.raises(ValueError, match="shape"):
         ForceRawMap.create([1.0, 1.0]).to_raw([1.0])
+
+
+def _first_frames(n: int) -> list[CanFrame]:
+    """First frames of n never-ending 3-frame RawCommand transfers, each its own session."""
+    out = []
+    for i in range(n):
+        node, prio = 1 + i % 127, (i // 127) % 32
+        frames = encode_raw_command(
+            list(range(8)), source_node_id=node, transfer_id=i, priority=prio
+        )
+        out.append(frames[0])
+    return out
+
+
+def test_assembler_keeps_one_transfer_per_session() -> None:
+    asm = TransferAssembler()
+    a = encode_raw_command(list(range(8)), source_node_id=10, transfer_id=1)
+    b = encode_raw_command(list(range(8, 16)), source_node_id=10, transfer_id=2, priority=3)
+    asm.feed(a[0], 0)
+    asm.feed(b[0], 0)  # same (node, type): replaces the first
+    assert asm.pending == 1
+    assert asm.feed(a[1], 0) is None and asm.orphans == 1  # another transfer ID / CAN ID
+    assert asm.feed(b[1], 0) is None
+    got = asm.feed(b[2], 0)
+    assert got is not None and got.message == RawCommandMsg(tuple(range(8, 16)))
+
+
+def test_assembler_caps_pending_transfers_and_counts_evictions() -> None:
+    asm = TransferAssembler(max_pending=16)
+    for f in _first_frames(400):
+        asm.feed(f, 0)
+    assert asm.pending == 16
+    assert asm.evicted == 400 - 16  # every start beyond the cap pushed the oldest out
+    good = encode_raw_command(list(range(8)), source_node_id=10, transfer_id=7)
+    assert [asm.feed(f, 0) for f in good][-1] is not None  # a real sender still gets through
+
+
+def test_assembler_expiry_counts_and_survives_a_clock_step_back() -> None:
+    asm = TransferAssembler(timeout_s=0.5)
+    for i, f in enumerate(_first_frames(50)):
+        asm.feed(f, i * 1_000_000)
+    asm.feed(_first_frames(1)[0], 10**6 * 300)  # node 1 restarted at 0.3 s: kept
+    assert asm.pending == 50
+    asm.feed(encode(NodeStatusMsg(1), source_node_id=3, transfer_id=0)[0], 10**6 * 549)
+    # started at 1..48 ms: stale; 49 ms: exactly the timeout, kept; node 1 restarted: kept
+    assert asm.expired == 48 and asm.pending == 2
+    asm.feed(encode(NodeStatusMsg(1), source_node_id=3, transfer_id=0)[0], 0)  # clock stepped back
+    assert asm.pending == 2
+
+
+@pytest.mark.parametrize("bad", [{"timeout_s": 0.0}, {"timeout_s": math.nan}, {"max_pending": 0}])
+def test_assembler_refuses_unbounded_settings(bad: dict[str, float]) -> None:
+    with pytest.raises(ValueError):
+        TransferAssembler(**bad)  # type: ignore[arg-type]
+
+
+def test_a_resent_transfer_only_changes_its_tail_bytes() -> None:
+    for m in (2, 8, 20):
+        a = encode_raw_command(list(range(m)), source_node_id=10, transfer_id=3)
+        b = encode_raw_command(list(range(m)), source_node_id=10, transfer_id=30)
+        assert with_transfer_id(a, 30) == b
+        assert decode_frames(with_transfer_id(a, 62)).transfer_id == 30  # wraps like next()

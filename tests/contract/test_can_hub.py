@@ -23,6 +23,7 @@ import pytest
 from bridges.can_io.bus import CanBusError, open_can_bus
 from bridges.can_io.hub import BANNER, CanHub, parse_channel
 from bridges.can_io.hub_bus import CanHubBus
+from bridges.can_io.reconnect import ReconnectingBus
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -40,7 +41,7 @@ def open_bus(hub: CanHub) -> Iterator[BusFactory]:
     buses: list[can.BusABC] = []
 
     def _open(**opts: object) -> can.BusABC:
-        buses.append(open_can_bus("canhub", hub.channel, **opts))
+        buses.append(open_can_bus("canhub", hub.channel, retry_period_s=None, **opts))
         return buses[-1]
 
     yield _open
@@ -207,8 +208,10 @@ def test_open_can_bus_choices(hub: CanHub) -> None:
         v1.send(_msg(3))
         got = v2.recv(1.0)
         assert got is not None and got.arbitration_id == 0x1003
-    with open_can_bus("canhub", hub.channel) as bus:
+    with open_can_bus("canhub", hub.channel, retry_period_s=None) as bus:
         assert isinstance(bus, CanHubBus)
+    with open_can_bus("canhub", hub.channel) as bus:
+        assert isinstance(bus, ReconnectingBus) and isinstance(bus.inner, CanHubBus)
 
 
 def _start_hub_process() -> tuple[subprocess.Popen[str], str]:

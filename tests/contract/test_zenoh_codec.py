@@ -273,3 +273,29 @@ def test_pure_modules_do_not_import_zenoh() -> None:
         " sys.exit('zenoh' in sys.modules)"
     )
     assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0
+
+
+@pytest.mark.parametrize(
+    "literal", ["9" * 19, "-" + "9" * 400, "9" * 5000, "1" + "0" * 400 + ".0", "1e999"]
+)
+def test_huge_number_literals_are_malformed_not_exceptions(literal: str) -> None:
+    payloads = [
+        f'{{"v":1,"X_N":{literal},"Y_N":0,"N_Nm":0}}',
+        f'{{"v":1,"u_N":[{literal}]}}',
+        f'{{"v":1,"index":{literal},"kind":"off"}}',
+        f'{{"v":1,"index":0,"kind":"bias","value":{literal}}}',
+        f'{{"v":{literal}}}',
+    ]
+    decoders = [decode_wrench_setpoint, decode_thruster_command, decode_fault_injection]
+    for payload in payloads:
+        for decode in (*decoders, decode_odometry, decode_status):
+            with pytest.raises(MalformedMessage):
+                decode(payload.encode())
+
+
+def test_wrench_limit_drops_setpoints_beyond_it() -> None:
+    ok = b'{"v":1,"X_N":100.0,"Y_N":-100.0,"N_Nm":5.0}'
+    assert decode_wrench_setpoint(ok, limit=(100.0, 100.0, 5.0)).tau.tolist() == [100, -100, 5]
+    with pytest.raises(MalformedMessage, match="beyond the limit"):
+        decode_wrench_setpoint(ok, limit=(100.0, 99.0, 5.0))
+    assert decode_wrench_setpoint(ok).tau[0] == 100.0  # no limit: as before

@@ -256,6 +256,7 @@ class Sink:
     def __init__(self) -> None:
         self.commands: list[np.ndarray] = []
         self.thrusting = threading.Event()
+        self.lapsed = False  # what the next take_lapse() says
 
     def send(self, u: np.ndarray) -> bool:
         self.commands.append(np.array(u))
@@ -268,6 +269,10 @@ class Sink:
 
     def tick(self, now_ns: int | None = None) -> None:
         return None
+
+    def take_lapse(self) -> bool:
+        lapsed, self.lapsed = self.lapsed, False
+        return lapsed
 
 
 class StatusSink(Said):
@@ -308,6 +313,25 @@ def test_a_cycle_allocates_a_fresh_setpoint_and_zeroes_a_stale_one() -> None:
     assert [s.setpoint_stale for s in status.published] == [False, True]
     assert d.last_status is not None and d.last_status.cycle == 3
     assert len(d.latency.reaction_ns) == 1  # one new setpoint
+
+
+def test_after_a_lapse_the_command_restarts_from_zero_not_from_the_old_one() -> None:
+    d, sink, status = _daemon()
+    full = WrenchSetpoint.checked(np.array([0.28, 0.0, 0.0]))  # every thruster near 0.1 N
+    d.ports.setpoints[0].put(full, 1 * S)
+    for k in range(5):  # the step limit (0.09 N per cycle) ramps the command up
+        r = d.cycle(1 * S + k * 100 * MS)
+    assert r is not None and np.abs(r.u).max() > 0.095
+    sink.lapsed = True  # e.g. the bus was down longer than the ESCs' timeout
+    d.ports.setpoints[0].put(full, 1 * S + 500 * MS)
+    after = d.cycle(1 * S + 500 * MS)
+    assert after is not None and d.lapses == 1
+    assert np.abs(after.u).max() <= 0.09 + 1e-9  # one step from zero, not from 0.1 N
+    assert "thruster commands lapsed (the ESCs are at zero): restarting from zero" in (
+        status.texts()
+    )
+    d.cycle(1 * S + 600 * MS)
+    assert status.texts()[-1] == "thruster commands reach the ESCs again" and d.lapses == 1
 
 
 def test_run_wakes_on_a_setpoint_and_ends_with_zero() -> None:

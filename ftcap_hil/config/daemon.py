@@ -21,6 +21,7 @@ from ftcap_hil.config.toml import HIL_DATA, read_toml
 from ftcap_hil.config.vessel import surface_vessel_from
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.daemon import DaemonConfig
+from ftcap_hil.runtime.estimation import OdometryLimits
 from ftcap_hil.runtime.port_settings import PortSettings
 
 
@@ -55,6 +56,15 @@ def daemon_config_from(root: Table) -> DaemonConfig:
         status_period_s=d.number("status_period_s", 0.1, positive=True),
         wake_on_setpoint=d.boolean("wake_on_setpoint", True),
         vessel_clock=d.boolean("vessel_clock", True),
+        odometry_limits=_odometry_limits(d),
+    )
+
+
+def _odometry_limits(d: Table) -> OdometryLimits:
+    """``[daemon] odometry_*``: what the vessel can do (runtime/estimation.py)."""
+    base = OdometryLimits()
+    return OdometryLimits(
+        *(d.number(f"odometry_{name}", getattr(base, name), positive=True) for name in base._fields)
     )
 
 

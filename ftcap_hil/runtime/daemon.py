@@ -38,7 +38,7 @@ from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.esc_watchdog import EscWatchdog
-from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
+from ftcap_hil.runtime.estimation import EstimationSampler, OdometryLimits, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
 from ftcap_hil.runtime.signals import capture_signals
@@ -112,6 +112,8 @@ class DaemonConfig:
     # time command averages over telemetry intervals by VesselClock (else by receipt stamps)
     vessel_clock: bool = True
     dt_clamp: tuple[float, float] = (0.2, 5.0)  # dt for rate limits, in periods (PX4 clamps)
+    # what the vessel can do: odometry beyond it is dropped before the estimator
+    odometry_limits: OdometryLimits = field(default_factory=OdometryLimits)
 
 
 def _latest(boxes: Sequence[Mailbox[Any]]) -> tuple[Any, int]:
@@ -149,7 +151,9 @@ class AllocatorDaemon:
         self.lapses = 0  # lapses of the thrusters' command stream (restarts from zero)
         self.transitions = TransitionLog(self._announce)
         self.esc_watchdog = EscWatchdog(self.transitions)
-        self.sampler = EstimationSampler(config.estimation_period_s, config.vessel_clock)
+        self.sampler = EstimationSampler(
+            config.estimation_period_s, config.vessel_clock, config.odometry_limits
+        )
         self.calls = PendingCalls(self.loop.wake)
         self.latency = LatencyStats()
         self.malformed_notice = MalformedNotice(min_interval_s=5.0)
@@ -225,6 +229,13 @@ class AllocatorDaemon:
         odom, tel_stamp = self._telemetry()
         fresh = self._freshness(now, sp_stamp, tel_stamp)
         sample = None if fresh.telemetry_stale else self.sampler.sample(odom, tel_stamp)
+        gate = self.sampler.gate
+        self.transitions.update(
+            "telemetry_implausible",
+            gate.reason is not None,
+            f"telemetry implausible ({gate.reason}): dropped, estimation paused",
+            "telemetry plausible again: estimation resumes",
+        )
         result = None
         self._restart_after_lapse()
         if fresh.setpoint_stale:
@@ -328,7 +339,9 @@ class AllocatorDaemon:
         """The status after the latest cycle, with this cycle's ``fresh`` inputs."""
         return assemble_status(
             mode=self.config.core.mode,
-            counts=LoopCounts(self.cycles, self.overruns, self.ports.malformed()),
+            counts=LoopCounts(
+                self.cycles, self.overruns, self.ports.malformed() + self.sampler.gate.rejected
+            ),
             fresh=fresh,
             last=self._last,
             u=self.core.u_prev,

@@ -108,6 +108,85 @@ class VesselClock:
         return mapped if receipt_ns - mapped <= self._max_shift_ns else receipt_ns
 
 
+class OdometryLimits(NamedTuple):
+    """What the vessel can do: telemetry beyond it is implausible (:class:`PlausibilityGate`).
+
+    Defaults are loose for any surface vessel (30 kn, 5 m/s^2: far beyond what thrust gives a
+    hull, so only forged or broken telemetry trips them); the margins cover the sensor's noise
+    and a GNSS re-fix of a couple of metres between two samples.
+    """
+
+    max_speed_m_s: float = 15.0
+    max_yaw_rate_rad_s: float = 2.0
+    max_accel_m_s2: float = 5.0
+    position_margin_m: float = 2.0
+    velocity_margin_m_s: float = 0.5
+
+
+class PlausibilityGate:
+    """Drops odometry the vessel cannot have produced, before it reaches the estimator.
+
+    Implausible: a non-finite value; a speed or yaw rate beyond the limits; a position that
+    moved more than ``max_speed dt + position_margin`` or a velocity that changed more than
+    ``max_accel dt + velocity_margin`` since the last kept sample (``dt`` on the vessel's
+    clock, else the receipt stamps). A forged sample among the vessel's own costs only
+    itself. A genuine jump (a GNSS re-fix) costs one sample: a sample that jumps from the
+    last kept one but follows on from the dropped one before it is kept (two samples agree
+    on the new track), so the gate cannot lock itself out.
+    """
+
+    def __init__(self, limits: OdometryLimits | None = None) -> None:
+        self.limits = limits or OdometryLimits()
+        self.rejected = 0
+        self.reason: str | None = None  # why the last sample was dropped; None: it was kept
+        self._kept: tuple[Odometry, int] | None = None
+        self._dropped: tuple[Odometry, int] | None = None  # the last one, if it was dropped
+
+    def check(self, odom: Odometry, receipt_ns: int) -> bool:
+        """True when ``odom`` is plausible (counted and ``reason`` set otherwise)."""
+        self.reason = self._why(odom, receipt_ns)
+        if self.reason is None:
+            self._kept, self._dropped = (odom, receipt_ns), None
+        else:
+            self.rejected += 1
+        return self.reason is None
+
+    def _why(self, odom: Odometry, receipt_ns: int) -> str | None:
+        lim = self.limits
+        eta, nu = np.asarray(odom.eta, dtype=np.float64), np.asarray(odom.nu, dtype=np.float64)
+        if not (np.all(np.isfinite(eta)) and np.all(np.isfinite(nu))):
+            return "non-finite pose or velocity"
+        speed = math.hypot(nu[0], nu[1])
+        if speed > lim.max_speed_m_s:
+            self._dropped = None
+            return f"speed {speed:.3g} m/s > {lim.max_speed_m_s:g}"
+        if abs(nu[2]) > lim.max_yaw_rate_rad_s:
+            self._dropped = None
+            return f"yaw rate {nu[2]:.3g} rad/s beyond {lim.max_yaw_rate_rad_s:g}"
+        if self._kept is None:
+            return None
+        jump = self._jump(self._kept, odom, receipt_ns)
+        if jump is None:
+            return None
+        dropped, self._dropped = self._dropped, (odom, receipt_ns)
+        if dropped is not None and self._jump(dropped, odom, receipt_ns) is None:
+            return None  # follows on from the sample before: the vessel's track moved
+        return jump
+
+    def _jump(self, prev: tuple[Odometry, int], odom: Odometry, receipt_ns: int) -> str | None:
+        lim, (p_odom, p_receipt) = self.limits, prev
+        dt = odom.time_s - p_odom.time_s
+        if not math.isfinite(dt) or dt < 0:
+            dt = max((receipt_ns - p_receipt) * 1e-9, 0.0)
+        moved = math.hypot(odom.eta[0] - p_odom.eta[0], odom.eta[1] - p_odom.eta[1])
+        if moved > lim.max_speed_m_s * dt + lim.position_margin_m:
+            return f"position jumped {moved:.3g} m in {dt:.3g} s"
+        dv = math.hypot(odom.nu[0] - p_odom.nu[0], odom.nu[1] - p_odom.nu[1])
+        if dv > lim.max_accel_m_s2 * dt + lim.velocity_margin_m_s:
+            return f"velocity jumped {dv:.3g} m/s in {dt:.3g} s"
+        return None
+
+
 class EstimationSample(NamedTuple):
     """The states at both ends of an interval (``observation``, vessel-clock ``dt_s``) and the
     mean command ``u_mean`` (m,) in N over it."""
@@ -129,8 +208,11 @@ class EstimationSampler:
     receipt stamps).
     """
 
-    def __init__(self, period_s: float, use_vessel_clock: bool) -> None:
+    def __init__(
+        self, period_s: float, use_vessel_clock: bool, limits: OdometryLimits | None = None
+    ) -> None:
         self.period_s = period_s
+        self.gate = PlausibilityGate(limits)
         self.use_vessel_clock = use_vessel_clock
         self.history = CommandHistory(horizon_s=10 * period_s + 5.0)
         self._clock = VesselClock()
@@ -146,6 +228,12 @@ class EstimationSampler:
         interval of at least 0.9 estimation periods since the last one; None in between."""
         if odom is None:
             return None
+        if receipt_ns != self._clock_fed[0] and not self.gate.check(odom, receipt_ns):
+            # dropped before the estimator: the interval goes on to the next good sample
+            self._clock_fed = (receipt_ns, receipt_ns)
+            return None
+        if receipt_ns == self._clock_fed[0] and self.gate.reason is not None:
+            return None  # the same implausible sample, seen again by a later cycle
         if receipt_ns != self._clock_fed[0]:
             mapped = (
                 self._clock.map(odom.time_s, receipt_ns) if self.use_vessel_clock else receipt_ns

@@ -1,0 +1,76 @@
+"""Odometry the vessel cannot have produced is dropped and counted before the estimator
+(runtime/estimation.py, PlausibilityGate); a genuine jump costs one sample, never a lock-out."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ftcap_hil.core.messages import Odometry
+from ftcap_hil.runtime.estimation import EstimationSampler, OdometryLimits, PlausibilityGate
+
+DT = 0.1
+
+
+def odo(k: int, north: float | None = None, u: float = 0.5) -> Odometry:
+    """The vessel sailing north at u m/s, sample k at k DT of vessel time."""
+    n = u * k * DT if north is None else north
+    return Odometry(np.array([n, 0.0, 0.0]), np.array([u, 0.0, 0.0]), k * DT)
+
+
+def ns(k: int) -> int:
+    return int(k * DT * 1e9) + 1_000_000
+
+
+@pytest.mark.parametrize(
+    ("bad", "why"),
+    [
+        (Odometry(np.array([math.nan, 0, 0]), np.zeros(3), 0.5), "non-finite"),
+        (Odometry(np.array([0.25, 0, 0]), np.array([1e6, 0, 0]), 0.5), "speed"),
+        (Odometry(np.array([0.25, 0, 0]), np.array([0.5, 0, 40.0]), 0.5), "yaw rate"),
+        (odo(5, north=1e4), "position jumped"),
+        (Odometry(np.array([0.25, 0, 0]), np.array([0.5, 9.0, 0]), 0.5), "velocity jumped"),
+    ],
+)
+def test_each_kind_of_implausible_sample_is_dropped_and_named(bad: Odometry, why: str) -> None:
+    gate = PlausibilityGate()
+    assert all(gate.check(odo(k), ns(k)) for k in range(5))
+    assert not gate.check(bad, ns(5))
+    assert gate.reason is not None and why in gate.reason and gate.rejected == 1
+
+
+def test_a_genuine_jump_costs_one_sample_then_the_gate_follows() -> None:
+    gate = PlausibilityGate(OdometryLimits(position_margin_m=1.0))
+    for k in range(5):
+        assert gate.check(odo(k), ns(k))
+    refix = [odo(k, north=0.5 * k * DT + 10.0) for k in range(5, 10)]  # 10 m re-fix
+    kept = [gate.check(o, ns(k)) for k, o in zip(range(5, 10), refix, strict=True)]
+    assert kept == [False, True, True, True, True]
+
+
+def test_absurd_samples_never_reach_the_estimator_and_sampling_goes_on() -> None:
+    s = EstimationSampler(period_s=0.3, use_vessel_clock=True)
+    s.command_sent(0, np.zeros(4))
+    out = []
+    for k in range(1, 60):
+        absurd = k % 7 == 0  # a forger's sample every 0.7 s among the vessel's own
+        o = Odometry(np.array([1e5, 0, 0]), np.array([1e6, 0, 0]), k * DT) if absurd else odo(k)
+        got = s.sample(o, ns(k))
+        if got is not None:
+            out.append(got.observation)
+    assert s.gate.rejected == 8
+    assert len(out) >= 15  # the intervals go on across a dropped sample
+    for obs in out:
+        assert np.abs(obs.x_prev).max() < 10 and np.abs(obs.x_now).max() < 10
+        assert 0.9 * 0.3 <= obs.dt_s < 0.45
+
+
+def test_the_same_implausible_sample_seen_by_later_cycles_is_counted_once() -> None:
+    s = EstimationSampler(period_s=0.3, use_vessel_clock=True)
+    s.command_sent(0, np.zeros(4))
+    bad = Odometry(np.array([0, 0, 0]), np.array([1e6, 0, 0]), 0.1)
+    for _ in range(5):
+        assert s.sample(bad, ns(1)) is None
+    assert s.gate.rejected == 1 and s.gate.reason is not None

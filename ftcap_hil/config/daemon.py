@@ -57,6 +57,8 @@ def daemon_config_from(root: Table) -> DaemonConfig:
         wake_on_setpoint=d.boolean("wake_on_setpoint", True),
         vessel_clock=d.boolean("vessel_clock", True),
         odometry_limits=_odometry_limits(d),
+        esc_stall_rpm=d.number("esc_stall_rpm", 50.0, lo=0.0),
+        esc_stall_s=d.number("esc_stall_s", 1.0, positive=True),
     )
 
 

@@ -190,6 +190,7 @@ class FtcapCore:
         u_sample: FloatArray | None = None,
         dt_s: float | None = None,
         forced_dead: BoolArray | None = None,
+        stalled: BoolArray | None = None,
     ) -> CycleResult:
         """One cycle; returns the command to send and what led to it.
 
@@ -201,7 +202,9 @@ class FtcapCore:
         dt_s: time since the last cycle for the rate limits; defaults to the configured
         period. truth: the true faults, needed in ``ORACLE`` mode only (ValueError without).
         forced_dead (m,): thrusters known failed from outside (a silent ESC): allocated
-        exactly 0, flagged faulty.
+        exactly 0, flagged faulty. stalled (m,): thrusters whose ESC reports no rpm under
+        command: allocated as dead (their recovery probes go on, so that a shaft turning
+        again is seen), flagged faulty, reported at delta_hat 0.
         """
         u_sample = self.u_prev if u_sample is None else u_sample
         if w is not None and not _finite(w):
@@ -216,6 +219,9 @@ class FtcapCore:
         forced = bool(dead_ext.any())
         if forced:
             delta = np.where(dead_ext, 0.0, delta)
+        stall = np.zeros(self.m, dtype=bool) if stalled is None else stalled & ~dead_ext
+        if stall.any():
+            delta = np.where(stall, 0.0, delta)
         dead = delta < self.config.allocator.dead_threshold
         u_pref, probe = None, None
         if self.config.mode is Mode.FTCAP:
@@ -229,13 +235,13 @@ class FtcapCore:
         alloc = self._unremove_if_short(alloc, out, delta, dead_ext, tau_d, bf, u_pref, probe, dt_s)
         self.u_prev = alloc.u
         est = out.estimate
-        if forced:
-            est = replace(est, delta_hat=np.where(dead_ext, 0.0, est.delta_hat))
+        if forced or stall.any():
+            est = replace(est, delta_hat=np.where(dead_ext | stall, 0.0, est.delta_hat))
         return CycleResult(
             alloc.u,
             est,
             alloc,
-            out.faulty | dead_ext,
+            out.faulty | dead_ext | stall,
             np.zeros(self.m, dtype=bool) if probe is None else probe > 0,
             estimation_frozen=self.config.mode.estimates and w is None,
             decision=out.decision,

@@ -32,12 +32,12 @@ import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
 from ftcap_hil.core.geometry import ThrusterSet
-from ftcap_hil.core.messages import EscStatus, FloatArray, Odometry, WrenchSetpoint
+from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
 from ftcap_hil.core.plants import SurfaceVessel
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox
 from ftcap_hil.runtime.calls import PendingCalls
-from ftcap_hil.runtime.esc_watchdog import EscWatchdog
+from ftcap_hil.runtime.esc_watchdog import EscStallMonitor, EscWatchdog
 from ftcap_hil.runtime.estimation import EstimationSampler, OdometryLimits, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
@@ -114,6 +114,10 @@ class DaemonConfig:
     dt_clamp: tuple[float, float] = (0.2, 5.0)  # dt for rate limits, in periods (PX4 clamps)
     # what the vessel can do: odometry beyond it is dropped before the estimator
     odometry_limits: OdometryLimits = field(default_factory=OdometryLimits)
+    # ESC telemetry as evidence: no rpm (below this) under command for esc_stall_s -> the
+    # thruster is allocated as dead until it turns again (0: off)
+    esc_stall_rpm: float = 50.0
+    esc_stall_s: float = 1.0
 
 
 def _latest(boxes: Sequence[Mailbox[Any]]) -> tuple[Any, int]:
@@ -151,6 +155,9 @@ class AllocatorDaemon:
         self.lapses = 0  # lapses of the thrusters' command stream (restarts from zero)
         self.transitions = TransitionLog(self._announce)
         self.esc_watchdog = EscWatchdog(self.transitions)
+        self.esc_stall = EscStallMonitor(
+            self.transitions, self.core.u_range, config.esc_stall_rpm, config.esc_stall_s
+        )
         self.sampler = EstimationSampler(
             config.estimation_period_s, config.vessel_clock, config.odometry_limits
         )
@@ -246,7 +253,12 @@ class AllocatorDaemon:
             self._tau_d = setpoint.tau
             obs, u_mean = (None, None) if sample is None else sample
             result = self.core.step(
-                setpoint.tau, obs, u_sample=u_mean, dt_s=dt, forced_dead=fresh.esc_failed
+                setpoint.tau,
+                obs,
+                u_sample=u_mean,
+                dt_s=dt,
+                forced_dead=fresh.esc_failed,
+                stalled=self._stalled(now),
             )
             self._send(result.u, now, started)
             if sp_stamp != self._last_sp_stamp:
@@ -259,6 +271,17 @@ class AllocatorDaemon:
             self._last_status_ns = now
             self._publish(now, fresh)
         return result
+
+    def _stalled(self, now: int) -> BoolArray | None:
+        """Thrusters whose ESC reports no rpm under the command they have (None: no ESC
+        telemetry, or the check is off)."""
+        ports = self.ports
+        if self.config.esc_stall_rpm <= 0 or ports.esc_latest is None or ports.esc_ages is None:
+            return None
+        latest = ports.esc_latest()
+        rpm = np.array([math.nan if st is None else st.rpm for st in latest], dtype=np.float64)
+        ages = ports.esc_ages(now)
+        return self.esc_stall.update(now, self.core.u_prev, rpm, ages, self.config.esc_timeout_s)
 
     def _restart_after_lapse(self) -> None:
         """After a lapse the ESCs hold zero (their own timeout), not ``u_prev``: the core's

@@ -97,7 +97,11 @@ class FaultDecider:
         observable = self._info.sum(axis=0) * self.config.observable_std**2 >= 1.0
         est = out.estimate
         sigma = np.sqrt(np.maximum(out.delta_var, 0.0))
-        self._effectiveness(est.delta_hat, sigma)
+        if not out.alarm:
+            # The sample that raised a change alarm usually straddles the onset, and every
+            # suspect of the alarm moves on it: flags and removals wait for the filter's own
+            # estimate of the next sample (a co-suspect was flagged for one cycle otherwise).
+            self._effectiveness(est.delta_hat, sigma)
         self._bias(est.bf_hat, out.bias_cov, dt_s, out.alarm)
         # An established fault: the estimate itself (0 once removed); otherwise the
         # optimistic bound.

@@ -25,6 +25,7 @@ from bridges.can_io.codec import (
 )
 from bridges.can_io.force_map import CurveForceMap
 from bridges.can_io.hub import CanHub
+from bridges.mavlink.gcs import wait_until
 from ftcap_hil.config.daemon import LoadedConfig, load_daemon_config
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.status import AllocatorStatus
@@ -74,12 +75,7 @@ class Tap(can.Listener):
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.01)
-    return cond()
+    return wait_until(cond, timeout_s, 0.01)
 
 
 @pytest.fixture

@@ -46,6 +46,7 @@ from bridges.can_io.codec import (
 from bridges.can_io.force_map import ForceRawMap, NonFiniteCommand
 from bridges.can_io.hub import CanHub
 from bridges.can_io.ports import receipt_ns
+from bridges.mavlink.gcs import wait_until
 from ftcap_hil.core.messages import EscStatus
 
 pytestmark = pytest.mark.timeout(120)
@@ -54,12 +55,7 @@ ESC_NODE_BASE = 20
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.002)
-    return cond()
+    return wait_until(cond, timeout_s, 0.002)
 
 
 def _to_frame(msg: can.Message) -> CanFrame:

@@ -42,6 +42,7 @@ from bridges.can_io.codec import (
 )
 from bridges.can_io.force_map import RAW_MAX, ForceRawMap, NonFiniteCommand
 from bridges.can_io.hub import CanHub
+from bridges.mavlink.gcs import wait_until
 from ftcap_hil.core.messages import EscStatus, ThrusterCommand
 from ftcap_hil.ports.mailbox import Mailbox
 from tests.fuzz.payloads import can_frames
@@ -66,12 +67,7 @@ class CheckedCommands(Mailbox[ThrusterCommand]):
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.01)
-    return cond()
+    return wait_until(cond, timeout_s, 0.01)
 
 
 class Live:

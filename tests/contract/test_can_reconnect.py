@@ -17,23 +17,18 @@ from bridges.can_io.bus import open_can_bus
 from bridges.can_io.force_map import ForceRawMap
 from bridges.can_io.hub import CanHub
 from bridges.can_io.reconnect import ReconnectingBus
+from bridges.mavlink.gcs import wait_until
+from ftcap_hil.apps.demo import free_ports
 
 pytestmark = pytest.mark.timeout(120)
 
 
 def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_ports(socket.SOCK_STREAM, 1)[0]
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.005)
-    return cond()
+    return wait_until(cond, timeout_s, 0.005)
 
 
 def test_commands_flow_again_after_a_hub_restart() -> None:

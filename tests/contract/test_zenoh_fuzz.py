@@ -23,8 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bridges.mavlink.gcs import wait_until
 from bridges.zenoh_io.codec import ZenohKeys, encode_wrench_setpoint
 from bridges.zenoh_io.link import ZenohAllocatorLink, ZenohVesselLink, make_config
+from ftcap_hil.apps.demo import free_ports
 from ftcap_hil.core.messages import WrenchSetpoint
 from ftcap_hil.ports.mailbox import Mailbox
 
@@ -81,18 +83,11 @@ def _rss_mb() -> float:
 
 
 def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_ports(socket.SOCK_STREAM, 1)[0]
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return cond()
+    return wait_until(cond, timeout_s, 0.05)
 
 
 def _flood(port: int, plan: dict[str, tuple[dict[str, object], int]]) -> None:

@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from bridges.mavlink.gcs import wait_until
 from bridges.zenoh_io.codec import ZenohKeys, encode_wrench_setpoint
 from bridges.zenoh_io.config import shipped_config_path
 from bridges.zenoh_io.link import (
@@ -129,12 +130,7 @@ def allocator(certs: Path, port: int) -> Iterator[ZenohAllocatorLink]:
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.02)
-    return cond()
+    return wait_until(cond, timeout_s, 0.02)
 
 
 def _status() -> AllocatorStatus:

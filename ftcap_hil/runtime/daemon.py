@@ -258,7 +258,7 @@ class AllocatorDaemon:
                 u_sample=u_mean,
                 dt_s=dt,
                 forced_dead=fresh.esc_failed,
-                stalled=self._stalled(now),
+                stalled=self._stalled(now, fresh),
             )
             self._send(result.u, now, started)
             if sp_stamp != self._last_sp_stamp:
@@ -272,15 +272,13 @@ class AllocatorDaemon:
             self._publish(now, fresh)
         return result
 
-    def _stalled(self, now: int) -> BoolArray | None:
-        """Thrusters whose ESC reports no rpm under the command they have (None: no ESC
-        telemetry, or the check is off)."""
-        ports = self.ports
-        if self.config.esc_stall_rpm <= 0 or ports.esc_latest is None or ports.esc_ages is None:
+    def _stalled(self, now: int, fresh: Freshness) -> BoolArray | None:
+        """Thrusters whose ESC reports no rpm under the command they have, on the ESC ages
+        the watchdog judged this cycle (None: no ESC telemetry, or the check is off)."""
+        ages, latest = fresh.esc_ages_s, self.ports.esc_latest
+        if self.config.esc_stall_rpm <= 0 or latest is None or ages is None:
             return None
-        latest = ports.esc_latest()
-        rpm = np.array([math.nan if st is None else st.rpm for st in latest], dtype=np.float64)
-        ages = ports.esc_ages(now)
+        rpm = np.array([math.nan if st is None else st.rpm for st in latest()], dtype=np.float64)
         return self.esc_stall.update(now, self.core.u_prev, rpm, ages, self.config.esc_timeout_s)
 
     def _restart_after_lapse(self) -> None:
@@ -315,7 +313,7 @@ class AllocatorDaemon:
 
     def _freshness(self, now: int, sp_stamp: int, tel_stamp: int) -> Freshness:
         cfg = self.config
-        esc_failed = None
+        esc_failed, ages = None, None
         if self.ports.esc_ages is not None:
             ages = self.ports.esc_ages(now)
             esc_failed = self.esc_watchdog.failed(now, ages, cfg.esc_timeout_s)
@@ -334,7 +332,7 @@ class AllocatorDaemon:
             "setpoint timeout: zero thrust",
             "setpoint received: allocating",
         )
-        return Freshness(sp_age, tel_age, sp_stale, tel_stale, esc_failed)
+        return Freshness(sp_age, tel_age, sp_stale, tel_stale, esc_failed, ages)
 
     def _send(self, u: FloatArray, now: int, started: int) -> None:
         """``u`` to the thrusters; the sampler gets it stamped when it went out: ``now`` plus

@@ -25,13 +25,15 @@ from ftcap_hil.runtime.transitions import TransitionLog
 @dataclass(frozen=True)
 class Freshness:
     """The inputs of one cycle as the watchdogs judged them: ages in s (+inf: never heard),
-    stale flags, and ``esc_failed`` (m,) from the ESC watchdog (None: no ESC monitor)."""
+    stale flags, ``esc_failed`` (m,) from the ESC watchdog and the ESC status ages it judged
+    (s; None: no ESC monitor)."""
 
     setpoint_age_s: float
     telemetry_age_s: float
     setpoint_stale: bool
     telemetry_stale: bool
     esc_failed: BoolArray | None = None
+    esc_ages_s: FloatArray | None = None
 
 
 @dataclass(frozen=True)

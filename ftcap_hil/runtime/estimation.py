@@ -228,17 +228,17 @@ class EstimationSampler:
         interval of at least 0.9 estimation periods since the last one; None in between."""
         if odom is None:
             return None
-        if receipt_ns != self._clock_fed[0] and not self.gate.check(odom, receipt_ns):
-            # dropped before the estimator: the interval goes on to the next good sample
-            self._clock_fed = (receipt_ns, receipt_ns)
-            return None
-        if receipt_ns == self._clock_fed[0] and self.gate.reason is not None:
-            return None  # the same implausible sample, seen again by a later cycle
-        if receipt_ns != self._clock_fed[0]:
+        if receipt_ns != self._clock_fed[0]:  # a new sample: judged once, then timed
+            if not self.gate.check(odom, receipt_ns):
+                # dropped before the estimator: the interval goes on to the next good sample
+                self._clock_fed = (receipt_ns, receipt_ns)
+                return None
             mapped = (
                 self._clock.map(odom.time_s, receipt_ns) if self.use_vessel_clock else receipt_ns
             )
             self._clock_fed = (receipt_ns, mapped)
+        elif self.gate.reason is not None:
+            return None  # the same implausible sample, seen again by a later cycle
         point = _Point(receipt_ns, odom, self._clock_fed[1])
         prev = self._last
         if prev is None:

@@ -25,7 +25,7 @@ import numpy as np
 
 from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.core.cycle import FtcapCore
-from ftcap_hil.core.estimation import Observation
+from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.offline import run_mode, told_sensor_noise

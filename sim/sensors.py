@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import wrap_angle
+from ftcap_hil.core.models.plants import wrap_angle
 
 
 def _axes(name: str, value: object) -> FloatArray:

@@ -23,7 +23,7 @@ import numpy as np
 
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.vessel3dof import Vessel3DOF
+from ftcap_hil.core.models.vessel3dof import Vessel3DOF
 from sim.environment import Environment, EnvironmentConfig, HullGeometry
 from sim.sensors import Measurement, OdometrySensor, SensorConfig
 from sim.thrusters import BankOutput, ThrusterBank, ThrusterBankConfig

@@ -46,10 +46,10 @@ from typing import Any
 
 import numpy as np
 
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.faults import FaultSchedule, Truth
-from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, FaultKind, FloatArray
-from ftcap_hil.core.plants import SurfaceVessel, wrap_angle
+from ftcap_hil.core.models.plants import SurfaceVessel, wrap_angle
 from sim.esc_model import DEFAULT_ESC, EscModel
 
 

@@ -3,7 +3,7 @@
 Pure numpy, no CAN library. Two maps with one interface (:class:`ForceMap`):
 
 * :class:`ForceRawMap`, linear: raw proportional to force (below);
-* :class:`CurveForceMap`, per-thruster :class:`~ftcap_hil.core.thruster_curve.ThrusterCurve`
+* :class:`CurveForceMap`, per-thruster :class:`~ftcap_hil.core.effectiveness.thruster_curve.ThrusterCurve`
   (nonlinear, asymmetric, optionally unidirectional)::
 
       raw_i = clip(rint(x_i(u_i) * 8191), -8191, 8191),   u_i = T_i(raw_i / 8191)
@@ -39,8 +39,8 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from ftcap_hil.core.effectiveness.thruster_curve import ThrusterCurve
 from ftcap_hil.core.errors import FtcapError
-from ftcap_hil.core.thruster_curve import ThrusterCurve
 
 RAW_MAX = 8191
 #: DroneCAN ``uavcan.equipment.esc.RawCommand.cmd`` holds at most 20 elements.

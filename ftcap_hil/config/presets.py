@@ -24,10 +24,10 @@ import numpy as np
 
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
+from ftcap_hil.core.effectiveness.geometry import Thruster, ThrusterSet, effectiveness
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.geometry import Thruster, ThrusterSet, effectiveness
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.vessel3dof import DAMPING_KEYS, Vessel3DOF
+from ftcap_hil.core.models.vessel3dof import DAMPING_KEYS, Vessel3DOF
 from sim.environment import (
     CurrentConfig,
     EnvironmentConfig,

@@ -51,10 +51,10 @@ import numpy as np
 from ftcap_hil.config.presets import AllocatorModel, VesselPreset, apply_mismatch, load_preset
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import TomlFile
-from ftcap_hil.core.controllers import PoseController
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.estimator import EstimatorConfig
-from ftcap_hil.core.geometry import ThrusterSet
+from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.models.controllers import PoseController
 from ftcap_hil.core.scenario import Scenario
 from sim.environment import CurrentConfig, Environment, WindConfig
 from sim.sensors import SensorConfig

@@ -16,13 +16,13 @@ from ftcap_hil.config.realistic import is_realistic, parse_realistic
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
 from ftcap_hil.config.vessel import plant_from
-from ftcap_hil.core.allocator import AllocatorConfig
-from ftcap_hil.core.controllers import PoseController, StateFeedback
+from ftcap_hil.core.allocation.allocator import AllocatorConfig
+from ftcap_hil.core.allocation.excitation import ExcitationConfig
+from ftcap_hil.core.allocation.qp import available_backends
 from ftcap_hil.core.cycle import CoreConfig
-from ftcap_hil.core.estimator import EstimatorConfig
-from ftcap_hil.core.excitation import ExcitationConfig
-from ftcap_hil.core.plants import LinearPlant
-from ftcap_hil.core.qp import available_backends
+from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.models.controllers import PoseController, StateFeedback
+from ftcap_hil.core.models.plants import LinearPlant
 from ftcap_hil.core.scenario import Scenario, Segment
 from ftcap_hil.core.status import Mode
 

@@ -12,11 +12,11 @@ from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import HIL_DATA, read_toml
 from ftcap_hil.config.vessel import surface_vessel_from
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import FaultSchedule
-from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.runtime.vessel_process import ShellSettings, VesselConfig
 from sim.esc_model import DEFAULT_ESC, EscModel
 from sim.vessel import SilentWindow, VesselSimConfig

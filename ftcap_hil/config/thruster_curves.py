@@ -3,7 +3,8 @@
 ``thruster_curve`` is one curve for every thruster or a list of m (vessel-file order), each
 a TOML file or the name of a shipped one (``ftcap_hil/data/thrusters``: ``t200-12v``, ...)
 with keys ``name``, ``source``, ``fraction``, ``thrust_n``
-(:mod:`ftcap_hil.core.thruster_curve`). ``curve_thrust_max_n`` (optional, one value or m)
+(:mod:`ftcap_hil.core.effectiveness.thruster_curve`). ``curve_thrust_max_n`` (optional, one
+value or m)
 scales each curve so that full ahead gives that thrust in N: a published curve's shape on a
 model whose thrusters are smaller. Without ``thruster_curve`` the force map is linear.
 """
@@ -15,9 +16,9 @@ from dataclasses import replace
 
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
+from ftcap_hil.core.effectiveness.thruster_curve import ThrusterCurve
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.geometry import ThrusterSet
-from ftcap_hil.core.thruster_curve import ThrusterCurve
 
 THRUSTER_DATA = "ftcap_hil.data.thrusters"
 

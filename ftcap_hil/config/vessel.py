@@ -15,10 +15,15 @@ from typing import Any
 
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml
+from ftcap_hil.core.effectiveness.geometry import (
+    Thruster,
+    ThrusterSet,
+    effectiveness,
+    paper_four_thrusters,
+)
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.geometry import Thruster, ThrusterSet, effectiveness, paper_four_thrusters
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
 
 PRESETS = ("paper-4.2",)
 PLANT_KINDS = ("linear", "vessel", "preset")

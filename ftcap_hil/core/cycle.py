@@ -19,9 +19,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ftcap_hil.core.allocator import Allocation, Allocator, AllocatorConfig
-from ftcap_hil.core.decisions import Decision
-from ftcap_hil.core.estimation import (
+from ftcap_hil.core.allocation.allocator import Allocation, Allocator, AllocatorConfig
+from ftcap_hil.core.allocation.excitation import Excitation, ExcitationConfig
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
+from ftcap_hil.core.estimation.config import Estimate, EstimatorConfig, wrench_scale
+from ftcap_hil.core.estimation.decisions import Decision
+from ftcap_hil.core.estimation.stages import (
     EstimationStage,
     IdentityStage,
     KalmanStage,
@@ -31,19 +34,11 @@ from ftcap_hil.core.estimation import (
     StageOutput,
     WindowedStage,
 )
-from ftcap_hil.core.estimator import (
-    Estimate,
-    EstimatorConfig,
-    LiteralEstimator,
-    WindowedEstimator,
-    wrench_scale,
-)
-from ftcap_hil.core.excitation import Excitation, ExcitationConfig
+from ftcap_hil.core.estimation.windowed import LiteralEstimator, WindowedEstimator
 from ftcap_hil.core.faults import Truth
-from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, FloatArray
+from ftcap_hil.core.models.vessel3dof import PlantModel
 from ftcap_hil.core.status import Mode
-from ftcap_hil.core.vessel3dof import PlantModel
 
 # A demand unmet by more than this fraction of the wrench range on an axis brings removed
 # thrusters back at their estimate for that cycle (FtcapCore._unremove_if_short).
@@ -115,7 +110,7 @@ class FtcapCore:
     ``B`` (k, m): effectiveness matrix, k = 3 for a surface vessel (tau = [X (N), Y (N),
     N (N*m)], body frame) or 1 for the linear plant; ``thrusters``: the m thrusters' limits;
     ``dt_s``: the allocation period (s). The mode picks the estimation stage
-    (core/estimation.py): ``FTCAP`` the Kalman estimator (or the windowed one with
+    (core/estimation/stages.py): ``FTCAP`` the Kalman estimator (or the windowed one with
     ``estimator.kind = "windowed"``), ``FTCAP_LITERAL`` the paper's literal one,
     ``ORACLE`` the truth handed in to :meth:`step`, ``CAP`` / ``NONE`` none (Delta_hat = I,
     f_hat = 0). ``plant``: the allocator's model of the plant, needed by the Kalman

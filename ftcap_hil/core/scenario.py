@@ -11,13 +11,13 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.core.controllers import PoseController, StateFeedback
 from ftcap_hil.core.cycle import CoreConfig
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.faults import FaultSchedule
-from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import FloatArray
+from ftcap_hil.core.models.controllers import PoseController, StateFeedback
+from ftcap_hil.core.models.vessel3dof import PlantModel
 from ftcap_hil.core.status import Mode
-from ftcap_hil.core.vessel3dof import PlantModel
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import wrap_angle
+from ftcap_hil.core.models.plants import wrap_angle
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import RunRecord, column_names

@@ -22,7 +22,7 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from ftcap_hil.core.messages import FloatArray  # noqa: E402
-from ftcap_hil.core.plants import LinearPlant  # noqa: E402
+from ftcap_hil.core.models.plants import LinearPlant  # noqa: E402
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.report.records import RunRecord  # noqa: E402
 

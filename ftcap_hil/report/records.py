@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.core.allocator import AllocationStatus
+from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CycleResult
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import LinearPlant, wrap_angle
+from ftcap_hil.core.models.plants import LinearPlant, wrap_angle
 from ftcap_hil.core.scenario import Scenario
 
 CONVERGENCE_TOL = 0.05  # |delta_hat - delta| for "converged"

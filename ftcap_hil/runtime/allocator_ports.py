@@ -14,7 +14,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ftcap_hil.core.geometry import ThrusterSet
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.messages import EscStatus
 from ftcap_hil.core.status import AllocatorStatus, Severity
 from ftcap_hil.runtime.command_log import CommandLog, LoggedSink

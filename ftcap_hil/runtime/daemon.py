@@ -31,9 +31,9 @@ from typing import Any, Protocol
 import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
-from ftcap_hil.core.geometry import ThrusterSet
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
-from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox
 from ftcap_hil.runtime.calls import PendingCalls

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ftcap_hil.core.estimation import Observation
+from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.messages import FloatArray, Odometry
 from ftcap_hil.ports.mailbox import Stamped
 

@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 
 from bridges.mavlink.gcs import MavlinkGcsLink, StatusText
-from ftcap_hil.core.controllers import limit_wrench
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import wrap_angle
+from ftcap_hil.core.models.controllers import limit_wrench
+from ftcap_hil.core.models.plants import wrap_angle
 from ftcap_hil.core.status import AllocatorStatus
 from ftcap_hil.ports.mailbox import Stamped
 from ftcap_hil.report.flight import FlightRecorder

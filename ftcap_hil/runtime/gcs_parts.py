@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 
 from bridges.mavlink.gcs import MavlinkGcsLink
-from ftcap_hil.core.controllers import PoseController
 from ftcap_hil.core.errors import ExitCode, FtcapError
 from ftcap_hil.core.faults import Injection
 from ftcap_hil.core.messages import FloatArray, Odometry
+from ftcap_hil.core.models.controllers import PoseController
 
 Controller = Callable[[FloatArray, FloatArray], FloatArray]
 Reference = Callable[[float], FloatArray]

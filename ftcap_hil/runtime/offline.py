@@ -15,10 +15,10 @@ from dataclasses import replace
 import numpy as np
 
 from ftcap_hil.core.cycle import FtcapCore
-from ftcap_hil.core.estimation import Observation
+from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import LinearPlant
+from ftcap_hil.core.models.plants import LinearPlant
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import Recorder, RunRecord

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ftcap_hil.core.thruster_curve import ThrusterCurve
+from ftcap_hil.core.effectiveness.thruster_curve import ThrusterCurve
 
 if TYPE_CHECKING:  # the CLI builds its parser without importing any bridge
     from bridges.mavlink.config import MavlinkEndpoint

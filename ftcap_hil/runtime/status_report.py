@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from ftcap_hil.core.allocator import AllocationStatus
+from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CycleResult
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray
 from ftcap_hil.core.status import AllocatorStatus, Mode

@@ -32,8 +32,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError, PortError
-from ftcap_hil.core.geometry import ThrusterSet
 from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, Odometry, ThrusterCommand
 from ftcap_hil.core.status import Severity
 from ftcap_hil.ports.mailbox import Stamped

@@ -32,7 +32,7 @@ from bridges.mavlink.gcs import MavlinkGcsLink, wait_until
 from ftcap_hil.apps.allocator import wire
 from ftcap_hil.apps.demo import free_ports
 from ftcap_hil.config.daemon import load_daemon_config
-from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.messages import EscStatus
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.daemon import AllocatorDaemon

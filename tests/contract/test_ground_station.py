@@ -17,10 +17,10 @@ from bridges.mavlink.config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEn
 from bridges.mavlink.gcs import MavlinkGcsLink
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
-from ftcap_hil.core.controllers import PoseController
 from ftcap_hil.core.errors import ExitCode
 from ftcap_hil.core.faults import Injection
 from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry
+from ftcap_hil.core.models.controllers import PoseController
 from ftcap_hil.core.status import AllocatorStatus, Mode
 from ftcap_hil.runtime.ground_station import (
     FlightPlan,

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.mission import load_mission, shipped_missions
-from ftcap_hil.core.controllers import limit_wrench
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import Injection, injection_plan
 from ftcap_hil.core.messages import FaultKind
+from ftcap_hil.core.models.controllers import limit_wrench
 from ftcap_hil.core.status import AllocatorStatus
 from ftcap_hil.report.flight import FlightRecorder
 from ftcap_hil.report.records import column_names

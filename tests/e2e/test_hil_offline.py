@@ -47,7 +47,7 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.scenario import parse_scenario
-from ftcap_hil.core.controllers import PoseController
+from ftcap_hil.core.models.controllers import PoseController
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.offline import run_mode
 from tests.e2e.rig import Rig, latest_odometry, odometry_state, wait_until

@@ -8,7 +8,7 @@ import tomllib
 import numpy as np
 
 from ftcap_hil.config.vessel import thrusters_from_table
-from ftcap_hil.core.geometry import ThrusterSet
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 
 S = 0.7071067811865476  # sin(pi/4) = cos(pi/4)
 

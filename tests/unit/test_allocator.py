@@ -10,10 +10,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ftcap_hil.core.allocator import AllocationStatus, Allocator, AllocatorConfig
-from ftcap_hil.core.estimator import wrench_scale
-from ftcap_hil.core.geometry import ThrusterSet, command_bounds, effectiveness, paper_four_thrusters
-from ftcap_hil.core.qp import BoxQpSolution, available_backends
+from ftcap_hil.core.allocation.allocator import AllocationStatus, Allocator, AllocatorConfig
+from ftcap_hil.core.allocation.qp import BoxQpSolution, available_backends
+from ftcap_hil.core.effectiveness.geometry import (
+    ThrusterSet,
+    command_bounds,
+    effectiveness,
+    paper_four_thrusters,
+)
+from ftcap_hil.core.estimation.config import wrench_scale
 from tests.unit.support import six_thrusters
 
 DT_S = 0.1

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ftcap_hil.core.geometry import command_bounds
+from ftcap_hil.core.effectiveness.geometry import command_bounds
 
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False)
 

@@ -6,11 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ftcap_hil.core.allocator import AllocationStatus
+from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
-from ftcap_hil.core.estimator import EstimatorConfig
+from ftcap_hil.core.effectiveness.geometry import (
+    command_bounds,
+    effectiveness,
+    paper_four_thrusters,
+)
+from ftcap_hil.core.estimation.config import EstimatorConfig
 from ftcap_hil.core.faults import Truth
-from ftcap_hil.core.geometry import command_bounds, effectiveness, paper_four_thrusters
 from ftcap_hil.core.status import Mode
 
 THS = paper_four_thrusters()

@@ -16,12 +16,12 @@ import time
 import numpy as np
 import pytest
 
-from ftcap_hil.core.allocator import AllocationStatus
+from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
-from ftcap_hil.core.estimation import Observation
-from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.messages import EscStatus, Odometry, WrenchSetpoint
-from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox, Stamped
 from ftcap_hil.runtime.calls import PendingCalls

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
-from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.esc_watchdog import EscStallMonitor
 from ftcap_hil.runtime.transitions import TransitionLog

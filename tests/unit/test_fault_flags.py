@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
-from ftcap_hil.core.estimator import EstimatorConfig
+from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.estimation.config import EstimatorConfig
 from ftcap_hil.core.faults import Truth
-from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.status import Mode
 
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.vessel import thrusters_from_table
+from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 from tests.unit.support import (
     EQ22_L03,
     EQ22_L05,

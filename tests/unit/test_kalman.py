@@ -1,5 +1,6 @@
-"""The Kalman fault estimator (core/kalman.py) and its decisions (core/decisions.py), open
-loop on the paper vessel with known commands and a known truth."""
+"""The Kalman fault estimator (core/estimation/kalman.py) and its decisions
+(core/estimation/decisions.py), open loop on the paper vessel with known commands and a
+known truth."""
 
 from __future__ import annotations
 
@@ -8,11 +9,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ftcap_hil.core.decisions import FaultDecider
-from ftcap_hil.core.estimator import EstimatorConfig, wrench_scale
-from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
-from ftcap_hil.core.kalman import KalmanEstimator, VesselStep, step_model
-from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.estimation.config import EstimatorConfig, wrench_scale
+from ftcap_hil.core.estimation.decisions import FaultDecider
+from ftcap_hil.core.estimation.kalman import KalmanEstimator, VesselStep, step_model
+from ftcap_hil.core.models.plants import SurfaceVessel
 
 THS = paper_four_thrusters()
 B = effectiveness(THS)
@@ -191,7 +192,7 @@ def test_a_thruster_bias_is_attributed_an_environmental_offset_is_not() -> None:
 @pytest.mark.parametrize("dt", [0.1, 0.5, 2.0])
 def test_pose_step_jacobians_match_finite_differences(preset: str, dt: float) -> None:
     from ftcap_hil.config.presets import load_preset
-    from ftcap_hil.core.step_models import PoseStep
+    from ftcap_hil.core.estimation.step_models import PoseStep
 
     vessel = dataclasses.replace(load_preset(preset).vessel, inversion="trapezoid")
     step = PoseStep(vessel)
@@ -212,7 +213,7 @@ def test_pose_step_jacobians_match_finite_differences(preset: str, dt: float) ->
 
 
 def test_pose_innovation_wraps_the_heading() -> None:
-    from ftcap_hil.core.step_models import PoseStep
+    from ftcap_hil.core.estimation.step_models import PoseStep
 
     e = PoseStep(SurfaceVessel()).innovation(np.array([0, 0, -3.1, 0, 0, 0.0]),
                                             np.array([0, 0, 3.1, 0, 0, 0.0]))  # fmt: skip
@@ -220,7 +221,7 @@ def test_pose_innovation_wraps_the_heading() -> None:
 
 
 def test_wave_model_is_stationary_at_the_told_level() -> None:
-    from ftcap_hil.core.wave_model import WaveModel
+    from ftcap_hil.core.estimation.wave_model import WaveModel
 
     sigma = np.array([2.0, 3.0, 0.5])
     model = WaveModel(2 * np.pi / 8.0, 0.1, sigma)

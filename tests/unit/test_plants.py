@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ftcap_hil.core.controllers import PoseController, StateFeedback
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel, wrap_angle
+from ftcap_hil.core.models.controllers import PoseController, StateFeedback
+from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel, wrap_angle
 
 
 def vec(n: int, bound: float) -> st.SearchStrategy[np.ndarray]:

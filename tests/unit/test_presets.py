@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.presets import apply_mismatch, load_preset, preset_names
+from ftcap_hil.core.effectiveness.geometry import effectiveness
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.geometry import effectiveness
 from sim.environment import Environment
 
 FROUDE = math.sqrt(70.0)  # CyberShip II is a 1:70 model

@@ -7,8 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ftcap_hil.core.geometry import Thruster, ThrusterSet, command_bounds, effectiveness
-from ftcap_hil.core.qp import make_solver
+from ftcap_hil.core.allocation.qp import make_solver
+from ftcap_hil.core.effectiveness.geometry import (
+    Thruster,
+    ThrusterSet,
+    command_bounds,
+    effectiveness,
+)
 
 
 def allocation_problems(m: int, n: int, seed: int):  # type: ignore[no-untyped-def]

@@ -14,9 +14,9 @@ import numpy as np
 
 from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.core.cycle import SHORT_FRACTION, FtcapCore
-from ftcap_hil.core.decisions import Decision
-from ftcap_hil.core.estimation import StageOutput
-from ftcap_hil.core.estimator import Estimate
+from ftcap_hil.core.estimation.config import Estimate
+from ftcap_hil.core.estimation.decisions import Decision
+from ftcap_hil.core.estimation.stages import StageOutput
 from ftcap_hil.runtime.offline import told_sensor_noise
 
 REMOVED = 1  # starboard main propeller, 0-based

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.scenario import load_scenario, parse_scenario, shipped_scenarios
+from ftcap_hil.core.effectiveness.geometry import effectiveness
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.geometry import effectiveness
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.status import Mode
 from tests.unit.support import EQ22_L03
 

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.sim import load_config
+from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import FaultEvent, FaultSchedule, Truth
-from ftcap_hil.core.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.messages import FaultInjection, FaultKind
-from ftcap_hil.core.plants import SurfaceVessel
+from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.runtime.vessel_process import MAX_CATCH_UP_STEPS, VesselProcess
 from sim.esc_model import DEFAULT_ESC, EscModel
 from sim.vessel import (

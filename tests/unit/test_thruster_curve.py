@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from bridges.can_io.force_map import RAW_MAX, CurveForceMap, ForceRawMap, NonFiniteCommand
-from ftcap_hil.core.thruster_curve import CurveError, ThrusterCurve
+from ftcap_hil.core.effectiveness.thruster_curve import CurveError, ThrusterCurve
 
 
 def _t200() -> ThrusterCurve:

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from ftcap_hil.core.plants import SurfaceVessel
-from ftcap_hil.core.vessel3dof import Vessel3DOF
+from ftcap_hil.core.models.plants import SurfaceVessel
+from ftcap_hil.core.models.vessel3dof import Vessel3DOF
 
 # A small made-up vessel; every expected number below is worked out by hand from it.
 SMALL = Vessel3DOF(

@@ -17,7 +17,7 @@ from functools import cached_property
 import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
 
 DAMPING_KEYS = (
     "X_u", "Y_v", "Y_r", "N_v", "N_r", "X_uu", "X_uuu",

@@ -19,7 +19,8 @@ threshold at a confidence of ``z_flag`` standard deviations (one-sided), with hy
   sigma_i > removal_threshold.
 * **observable now** (reported): the Fisher information of the last ``window`` samples
   alone would give delta_i a standard deviation below ``observable_std``. Where it is not,
-  the estimate holds (see ``core/kalman.py``) while its variance grows, so the bounds above
+  the estimate holds (see ``core/estimation/kalman.py``) while its variance grows, so the
+  bounds above
   keep every decision as it is and the allocation drifts back to CAP's: nothing drifts.
 * **bias**: the estimated generalized bias b = B f + tau_env mixes thruster biases with the
   environment (current, wind, mean wave drift) and model error, which only the controller
@@ -39,8 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ftcap_hil.core.estimator import EstimatorConfig
-from ftcap_hil.core.kalman import FilterOutput, inv_small
+from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.estimation.kalman import FilterOutput, inv_small
 from ftcap_hil.core.messages import BoolArray, FloatArray
 
 # chi^2 quantiles at 0.999 for 0..3 degrees of freedom (bias attribution residual).

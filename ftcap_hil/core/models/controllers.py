@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import wrap_angle
+from ftcap_hil.core.models.plants import wrap_angle
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ filter re-converges in a few samples. The sample that raised the alarm usually s
 onset (part healthy, part faulty): it updates s only, never the parameters.
 
 Decisions (flags, what the allocator uses) are taken from the estimate *and* its variance in
-:mod:`ftcap_hil.core.decisions`.
+:mod:`ftcap_hil.core.estimation.decisions`.
 """
 
 from __future__ import annotations
@@ -46,11 +46,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ftcap_hil.core.estimator import Estimate, EstimatorConfig
+from ftcap_hil.core.estimation.config import Estimate, EstimatorConfig
+from ftcap_hil.core.estimation.step_models import (
+    LinearStep,
+    StepModel,
+    VesselStep,
+    inv_small,
+    step_model,
+)
+from ftcap_hil.core.estimation.wave_model import WaveModel
 from ftcap_hil.core.messages import BoolArray, FloatArray
-from ftcap_hil.core.step_models import LinearStep, StepModel, VesselStep, inv_small, step_model
-from ftcap_hil.core.vessel3dof import PlantModel
-from ftcap_hil.core.wave_model import WaveModel
+from ftcap_hil.core.models.vessel3dof import PlantModel
 
 # Re-exported: callers import the step models from here too.
 __all__ = [

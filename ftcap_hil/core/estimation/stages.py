@@ -13,7 +13,7 @@ stage              used by
 IdentityStage      ``none``, ``cap``: delta = 1, b = 0, never a flag
 OracleStage        ``oracle``: the true faults
 WindowedStage      ``ftcap`` with ``estimator.kind = "windowed"``; ``ftcap-literal``
-KalmanStage        ``ftcap`` (default): core/kalman.py + core/decisions.py
+KalmanStage        ``ftcap`` (default): core/estimation/kalman.py + core/estimation/decisions.py
 =================  ===================================================================
 """
 
@@ -25,17 +25,13 @@ from typing import Protocol
 
 import numpy as np
 
-from ftcap_hil.core.decisions import Decision, FaultDecider
-from ftcap_hil.core.estimator import (
-    Estimate,
-    EstimatorConfig,
-    LiteralEstimator,
-    WindowedEstimator,
-)
+from ftcap_hil.core.estimation.config import Estimate, EstimatorConfig
+from ftcap_hil.core.estimation.decisions import Decision, FaultDecider
+from ftcap_hil.core.estimation.kalman import KalmanEstimator
+from ftcap_hil.core.estimation.windowed import LiteralEstimator, WindowedEstimator
 from ftcap_hil.core.faults import Truth
-from ftcap_hil.core.kalman import KalmanEstimator
 from ftcap_hil.core.messages import BoolArray, FloatArray
-from ftcap_hil.core.vessel3dof import PlantModel
+from ftcap_hil.core.models.vessel3dof import PlantModel
 
 
 @dataclass(frozen=True)
@@ -186,8 +182,8 @@ class WindowedStage:
 
 
 class KalmanStage:
-    """Kalman filter on the measured motion plus statistical decisions (core/kalman.py,
-    core/decisions.py). Needs finite :class:`Observation` samples (FtcapCore.step drops
+    """Kalman filter on the measured motion plus statistical decisions (core/estimation/kalman.py,
+    core/estimation/decisions.py). Needs finite :class:`Observation` samples (FtcapCore.step drops
     the others)."""
 
     def __init__(

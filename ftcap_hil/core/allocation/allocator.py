@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ftcap_hil.core.geometry import ThrusterSet, command_bounds
+from ftcap_hil.core.allocation.qp import make_solver
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet, command_bounds
 from ftcap_hil.core.messages import BoolArray, FloatArray
-from ftcap_hil.core.qp import make_solver
 
 _MAX_DEMAND = 10.0  # |tau_d - b_hat| / S beyond this is scaled down before the QP: the
 # allocation is the same (saturated towards that direction) and the QP stays well scaled.

@@ -4,8 +4,8 @@ A :class:`StepModel` maps the tracked state s (ns,) of the plant (x (1,) for the
 of section 4.1, nu = [u, v, r] (3,) body velocities for the vessel, or the pose and the
 velocities [north, east, psi, u, v, r] (6,) when the filter is given the pose's noise too)
 over one step of ``dt`` seconds under a constant actuator wrench w (k,) (N, N, N*m for the
-vessel), and gives the Jacobians the extended Kalman filter of :mod:`ftcap_hil.core.kalman`
-needs. Pure: no I/O.
+vessel), and gives the Jacobians the extended Kalman filter of
+:mod:`ftcap_hil.core.estimation.kalman` needs. Pure: no I/O.
 
 Why the pose: a real vessel measures its position (GNSS, motion capture) far better, over
 the seconds a fault takes to show, than its velocity. A 100 kN loss on a 6000 t vessel is
@@ -23,8 +23,8 @@ from typing import Protocol
 import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.plants import LinearPlant, SurfaceVessel
-from ftcap_hil.core.vessel3dof import PlantModel, Vessel3DOF
+from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.models.vessel3dof import PlantModel, Vessel3DOF
 
 
 class StepModel(Protocol):

@@ -1,0 +1,1 @@
+"""The allocation: the bounded QP, its solver registry, the excitation."""

@@ -1,0 +1,1 @@
+"""Where B comes from: thruster geometry -> effectiveness, thruster curves."""

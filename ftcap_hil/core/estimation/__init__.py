@@ -1,0 +1,1 @@
+"""Fault estimation: the filters, their decisions, the step and wave models."""

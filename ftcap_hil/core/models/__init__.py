@@ -1,0 +1,1 @@
+"""Plants: the models the estimator and the offline loop integrate, and controllers."""

@@ -3,7 +3,8 @@
 Pure numpy, no CAN library. Two maps with one interface (:class:`ForceMap`):
 
 * :class:`ForceRawMap`, linear: raw proportional to force (below);
-* :class:`CurveForceMap`, per-thruster :class:`~ftcap_hil.core.effectiveness.thruster_curve.ThrusterCurve`
+* :class:`CurveForceMap`, per-thruster
+  :class:`~ftcap_hil.core.effectiveness.thruster_curve.ThrusterCurve`
   (nonlinear, asymmetric, optionally unidirectional)::
 
       raw_i = clip(rint(x_i(u_i) * 8191), -8191, 8191),   u_i = T_i(raw_i / 8191)

@@ -6,7 +6,8 @@ allocator is told (its own plant and thruster geometry): a scenario states both,
 mismatch on top of a preset. Per step of ``dt_s`` with the commands ``u`` (m,) N held::
 
     environment at the step's start  -> current (NED), wind + wave wrench (body)
-    thruster bank (lag, asymmetry, dead band, int14, faults)  -> produced forces F (m,)
+    in-flow per thruster: (nu_xy - R(psi)^T current) . its thrust direction (from B's column)
+    thruster bank (drives, propellers, asymmetry, dead band, int14, faults) -> F (m,)
     tau = B_true F_mean                 the wrench the thrusters really produce
     x <- vessel.step_rk4(x, tau, dt, current, tau_env)       x = [north, east, psi, u, v, r]
     sensor(t, x)  -> odometry samples delivered by now (noise, bias, rate, delay, dropouts)
@@ -76,6 +77,9 @@ class TruthModel:
         self._x = np.array(x0, dtype=np.float64)
         self._t = float(t0_s)
         self._bank = ThrusterBank(config.bank)
+        xy = config.B[:2]
+        norm = np.linalg.norm(xy, axis=0)
+        self._directions = xy / np.where(norm > 0.0, norm, 1.0)  # (2, m) unit thrust directions
         env = config.environment
         self._env = None
         if env is not None and config.hull is not None:
@@ -109,7 +113,7 @@ class TruthModel:
         if self._env is not None:
             sample = self._env.sample(self._t, self._x)
             current, tau_env = sample.current_ned, sample.tau_env
-        out = self._bank.step(u, truth, dt_s)
+        out = self._bank.step(u, truth, dt_s, self._axial_inflow(current))
         tau = cfg.B @ out.produced_mean
         cur = current if self._env is not None else None
         env = tau_env if self._env is not None else None
@@ -120,6 +124,14 @@ class TruthModel:
         return TruthStep(
             self._t, self._x.copy(), out.produced_mean, tau, current, tau_env, out, measured
         )
+
+    def _axial_inflow(self, current_ned: FloatArray) -> FloatArray:
+        """(m,) m/s: the water's speed through each thruster along its thrust direction."""
+        psi = self._x[2]
+        c, s = math.cos(psi), math.sin(psi)
+        cur_body = np.array([c * current_ned[0] + s * current_ned[1],
+                             -s * current_ned[0] + c * current_ned[1]])  # fmt: skip
+        return np.asarray(self._directions.T @ (self._x[3:5] - cur_body))
 
     def _measure(self) -> list[Measurement]:
         if self._sensor is None:

@@ -11,6 +11,7 @@ mismatch on top of a preset. Per step of ``dt_s`` with the commands ``u`` (m,) N
     tau = B_true F_mean                 the wrench the thrusters really produce
     x <- vessel.step_rk4(x, tau, dt, current, tau_env)       x = [north, east, psi, u, v, r]
     sensor(t, x)  -> odometry samples delivered by now (noise, bias, rate, delay, dropouts)
+    feedback(t, bank) -> the drives' speed and current reports delivered by now
 
 Pure: no I/O, no clock; every random stream comes from the configured seeds.
 """
@@ -26,6 +27,7 @@ from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.vessel3dof import Vessel3DOF
 from sim.environment import Environment, EnvironmentConfig, HullGeometry
+from sim.feedback import FeedbackConfig, FeedbackSample, FeedbackSensor
 from sim.sensors import Measurement, OdometrySensor, SensorConfig
 from sim.thrusters import BankOutput, ThrusterBank, ThrusterBankConfig
 
@@ -44,6 +46,7 @@ class TruthConfig:
     sensor: SensorConfig | None = None
     substeps: int = 4
     seed: int = 0
+    feedback: FeedbackConfig | None = None  # the drives' telemetry (None: none reported)
 
     def __post_init__(self) -> None:
         if self.B.shape != (3, self.bank.m):
@@ -67,6 +70,7 @@ class TruthStep:
     tau_env: FloatArray
     bank: BankOutput
     measurements: list[Measurement] = field(default_factory=list)
+    feedback: list[FeedbackSample] = field(default_factory=list)
 
 
 class TruthModel:
@@ -86,6 +90,8 @@ class TruthModel:
             environment = Environment(env, config.hull, seed=config.seed)
             self._env = None if environment.calm else environment
         self._sensor = None if config.sensor is None else OdometrySensor(config.sensor)
+        fb = config.feedback
+        self._feedback = None if fb is None else FeedbackSensor(fb, config.bank.m)
 
     @property
     def t_s(self) -> float:
@@ -121,8 +127,9 @@ class TruthModel:
         self._x = cfg.vessel.step_rk4(self._x, tau, dt_s, cfg.substeps, cur, env)
         self._t += dt_s
         measured = self._measure()
+        fb = [] if self._feedback is None else self._feedback.step(self._t, out)
         return TruthStep(
-            self._t, self._x.copy(), out.produced_mean, tau, current, tau_env, out, measured
+            self._t, self._x.copy(), out.produced_mean, tau, current, tau_env, out, measured, fb
         )
 
     def _axial_inflow(self, current_ned: FloatArray) -> FloatArray:

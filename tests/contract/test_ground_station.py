@@ -30,7 +30,7 @@ from ftcap_hil.runtime.ground_station import (
     Refused,
     WrenchLaw,
 )
-from tests.contract.mavlink_support import free_udp_ports, wait_until
+from tests.support.mavlink_peers import free_udp_ports, wait_until
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.usefixtures("no_leaked_threads")]
 

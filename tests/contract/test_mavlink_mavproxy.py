@@ -32,7 +32,7 @@ from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
 from ftcap_hil.core.messages import FaultInjection, FaultKind
-from tests.contract.mavlink_support import free_udp_ports, wait_until
+from tests.support.mavlink_peers import free_udp_ports, wait_until
 
 MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
 pytestmark = [

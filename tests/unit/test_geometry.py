@@ -12,7 +12,7 @@ import pytest
 from ftcap_hil.config.vessel import thrusters_from_table
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.errors import ConfigError
-from tests.unit.support import (
+from tests.support.vessels import (
     EQ22_L03,
     EQ22_L05,
     S,

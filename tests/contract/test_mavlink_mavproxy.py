@@ -1,10 +1,10 @@
 """Interop: MAVProxy lists and sets the allocator's and the vessel's parameters and injects
-failures into the vessel, in the two ways the README gives:
+failures into the vessel, in the two ways docs/hil.md gives:
 
 * standing in for the ground station on its inbox port (``--master=udp:127.0.0.1:14550``,
   which both links list as a peer), and
 * as an extra ground station with one link to the allocator's inbox only
-  (``--master=udpout:127.0.0.1:14570``, the README's line, also the Docker one): MAVProxy
+  (``--master=udpout:127.0.0.1:14570``, the line of docs/hil.md, also the Docker one): MAVProxy
   sends on that one link, and the allocator relays what is for the vessel, and back;
   with MAVLink 2 signing too (``signing key PASSPHRASE``).
 

@@ -4,7 +4,6 @@ commands run where the transport libraries cannot be imported at all."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -12,31 +11,13 @@ from pathlib import Path
 import pytest
 
 from ftcap_hil.apps import cli
-
-TRANSPORTS = ("pymavlink", "zenoh", "can", "dronecan")
-
-# A sitecustomize that makes every transport library (and its submodules) unimportable.
-REFUSER = f"""
-import sys
-
-class Refuse:
-    def find_spec(self, name, path=None, target=None):
-        if name.split(".")[0] in {TRANSPORTS!r}:
-            raise ImportError(f"{{name}} is refused in this test")
-        return None
-
-sys.meta_path.insert(0, Refuse())
-"""
+from tests.support.no_transports import TRANSPORTS, env_without_transports
 
 
 @pytest.fixture
 def no_transports(tmp_path: Path) -> dict[str, str]:
     """An environment in which importing pymavlink, zenoh, can or dronecan raises."""
-    folder = tmp_path / "refuse"
-    folder.mkdir()
-    (folder / "sitecustomize.py").write_text(REFUSER)
-    path = os.pathsep.join(p for p in (str(folder), os.environ.get("PYTHONPATH", "")) if p)
-    return {**os.environ, "PYTHONPATH": path}
+    return env_without_transports(tmp_path / "refuse")
 
 
 def ftcap_hil(env: dict[str, str], *args: str) -> subprocess.CompletedProcess[str]:

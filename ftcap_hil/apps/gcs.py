@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.apps.options import add_set_option
 from ftcap_hil.config.mission import load_mission, shipped_missions
 from ftcap_hil.core.errors import ConfigError, ExitCode, FtcapError
 from ftcap_hil.report.flight import FlightRecorder
@@ -53,13 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", type=Path, help="output folder (default: ftcap-runs/<mission>-<time>)")
     p.add_argument("--duration", type=float, help="mission seconds to fly (default: the mission's)")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="override a mission value, e.g. --set mission.mode=cap --set gcs.wrench_limit=[1,1,1]",
-    )
+    add_set_option(p, "mission", "mission.mode=cap")
     p.add_argument("--gcs-port", type=int, default=14550, help="this script's UDP inbox")
     p.add_argument("--allocator-port", type=int, default=14570, help="the allocator's UDP inbox")
     p.add_argument("--vessel-port", type=int, default=14560, help="the vessel's UDP inbox")

@@ -171,10 +171,12 @@ class _Cusum:
         self.high = 0.0
 
     def update(self, z: float, k: float) -> None:
+        """One residual ``z`` (band units) with allowance ``k``."""
         self.low = max(0.0, self.low - z - k)
         self.high = max(0.0, self.high + z - k)
 
     def reset(self) -> None:
+        """Back to zero (a new episode, or the model just calibrated)."""
         self.low = self.high = 0.0
 
 
@@ -210,12 +212,14 @@ class _Channel:
     # --- prediction -------------------------------------------------------------------
 
     def reference(self, u: float) -> float:
+        """The speed (deflection) a healthy drive settles at for the force ``u`` (N)."""
         m = self.model
         if m.is_shaft:
             return math.copysign(math.sqrt(abs(u) / m.k_thrust), u)
         return u / m.full_force_n
 
     def open_water(self, n: float) -> float:
+        """The force (N) a healthy actuator gives at speed (deflection) ``n`` at rest."""
         m = self.model
         return m.k_thrust * n * abs(n) if m.is_shaft else n * m.full_force_n
 
@@ -251,6 +255,8 @@ class _Channel:
         return prev[1], prev[2], 0.0
 
     def current_at(self, n: float, v_axial: float, scale: float = 1.0) -> float:
+        """The current (A) the load at speed ``n`` and in-flow ``v_axial`` draws, its part
+        above idle times ``scale`` (the calibration)."""
         m = self.model
         q = m.k_torque * (n * abs(n) - abs(n) * v_axial * m.inflow_torque)
         return scale * 2.0 * math.pi * abs(n * q) / m.watts_per_amp + m.idle_a

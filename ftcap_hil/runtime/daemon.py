@@ -32,6 +32,7 @@ import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
+from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
 from ftcap_hil.core.models.plants import SurfaceVessel
@@ -376,7 +377,12 @@ class AllocatorDaemon:
         )
 
     def _publish(self, now: int, fresh: Freshness) -> None:
-        st = self.status(now, fresh)
+        try:
+            st = self.status(now, fresh)
+        except MalformedMessage as e:  # a non-finite estimate: nothing to publish, go on
+            self.transitions.update("status", True, f"status not built: {e}", None, Severity.ERROR)
+            return
+        self.transitions.update("status", False, "")
         self.last_status = st
         for sink in self.ports.status:
             name = type(sink).__name__

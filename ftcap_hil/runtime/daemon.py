@@ -274,12 +274,13 @@ class AllocatorDaemon:
         return result
 
     def _evidence(self, now: int, fresh: Freshness) -> Evidence:
-        """What the ESC telemetry says of the thrusters: dead (silent, the watchdog's
-        ``esc_failed``) and stalled (no rpm under the command they have, on the ESC ages the
-        watchdog judged this cycle; none without ESC telemetry or with the check off)."""
+        """What the ESC telemetry says of the thrusters this cycle: dead (silent: the
+        watchdog's ``esc_failed``) and stalled (:meth:`_stalled`)."""
         return Evidence.of(self.core.m, fresh.esc_failed, self._stalled(now, fresh))
 
     def _stalled(self, now: int, fresh: Freshness) -> BoolArray | None:
+        """Thrusters whose ESC reports no rpm under the command they have, on the ESC ages
+        the watchdog judged this cycle (None: no ESC telemetry, or the check is off)."""
         ages, latest = fresh.esc_ages_s, self.ports.esc_latest
         if self.config.esc_stall_rpm <= 0 or latest is None or ages is None:
             return None

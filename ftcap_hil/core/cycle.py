@@ -19,7 +19,7 @@ e.g. after the shell had to send zero).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -29,6 +29,13 @@ from ftcap_hil.core.allocation.excitation import Excitation, ExcitationConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.estimation.config import Estimate, EstimatorConfig, wrench_scale
 from ftcap_hil.core.estimation.decisions import Decision
+from ftcap_hil.core.estimation.shaft import (
+    DiagnosisConfig,
+    DriveModel,
+    DriveReport,
+    ShaftDiagnoser,
+    ShaftVerdict,
+)
 from ftcap_hil.core.estimation.stages import (
     EstimationStage,
     IdentityStage,
@@ -36,6 +43,7 @@ from ftcap_hil.core.estimation.stages import (
     Observation,
     OracleStage,
     Sample,
+    StageOutput,
     WindowedStage,
 )
 from ftcap_hil.core.estimation.windowed import LiteralEstimator, WindowedEstimator
@@ -68,6 +76,8 @@ class CoreConfig:
     # as its data sheet or a step test gives it; the estimator then compares the motion with
     # the lagged force, not with the command.
     thruster_lag_s: tuple[float, ...] = ()
+    # The drives' diagnosis (core/estimation/shaft.py), used when FtcapCore has drive models.
+    diagnosis: DiagnosisConfig = field(default_factory=DiagnosisConfig)
 
 
 class ThrustLag:
@@ -101,6 +111,7 @@ class CycleResult:
     probing: BoolArray  # (m,), a recovery probe is active
     estimation_frozen: bool
     decision: Decision | None = None  # the Kalman stage's decision (in use, observable, bias)
+    shaft: ShaftVerdict | None = None  # the drives' verdict (None: no drive models)
 
 
 def _finite(sample: Sample) -> bool:
@@ -131,6 +142,7 @@ class FtcapCore:
         period_s: float,
         config: CoreConfig | None = None,
         plant: PlantModel | None = None,
+        drives: Sequence[DriveModel] | None = None,
     ):
         self.config = config or CoreConfig()
         self.B = np.array(B, dtype=np.float64)
@@ -148,6 +160,13 @@ class FtcapCore:
         self._lag = ThrustLag(np.array(lag)) if lag and max(lag) > 0.0 else None
         self._unsized = isinstance(self.stage, KalmanStage) and self.config.excitation.info_rate > 0
         self.u_prev = np.zeros(self.m)
+        self.shaft: ShaftDiagnoser | None = None
+        if drives is not None and self.config.mode is Mode.FTCAP:
+            if len(drives) != self.m:
+                raise ValueError(f"drives: expected {self.m} drive models, got {len(drives)}")
+            self.shaft = ShaftDiagnoser(drives, self.config.diagnosis)
+        self._motion_only_s = np.zeros(self.m)  # a motion-only removal held this long
+        self._period_s = period_s
 
     def _size_excitation(self, estimation_dt_s: float) -> None:
         """Raise the dither and probe amplitudes to what the sensor's noise needs (see
@@ -190,6 +209,8 @@ class FtcapCore:
         u_sample: FloatArray | None = None,
         elapsed_s: float | None = None,
         evidence: Evidence | None = None,
+        feedback: Sequence[DriveReport] = (),
+        t_s: float | None = None,
     ) -> CycleResult:
         """One cycle; returns the command to send and what led to it.
 
@@ -202,6 +223,10 @@ class FtcapCore:
         period. truth: the true faults, needed in ``ORACLE`` mode only (ValueError without).
         evidence: thrusters known dead or stalled from outside (the ESC telemetry; None:
         nothing known), applied once to the stage's output (:func:`apply_evidence`).
+        feedback: the drive reports received since the last cycle and ``t_s`` the time now
+        (s, the reports' clock), for the drives' diagnosis (with drive models only): the
+        motion filter is then fed the thrust the measured speeds imply, and the verdict
+        joins the evidence (:meth:`Evidence.with_shaft`).
         """
         u_sample = self.u_prev if u_sample is None else u_sample
         if w is not None and not _finite(w):
@@ -211,8 +236,13 @@ class FtcapCore:
         if self._lag is not None and isinstance(w, Observation):
             u_sample = self._lag.mean_force(u_sample, w.dt_s)
         ev = Evidence.none(self.m) if evidence is None else evidence
+        verdict = None
+        if self.shaft is not None and t_s is not None:
+            verdict, u_sample = self._diagnose(feedback, t_s, w is not None, u_sample)
         out = self.stage.update(w, u_sample, truth)
-        seen = apply_evidence(ev, out, self.config.allocator.dead_threshold)
+        if verdict is not None:
+            ev = ev.with_shaft(verdict, self._motion_confirmed(out, verdict, elapsed_s))
+        seen = apply_evidence(ev, out, self.config.allocator.dead_threshold, self.B)
         u_pref, probe = self._excite(seen, advance=w is not None)
 
         def allocate(delta: FloatArray) -> Allocation:
@@ -222,6 +252,8 @@ class FtcapCore:
 
         alloc = self._unremove_if_short(allocate(seen.delta), seen, allocate)
         self.u_prev = alloc.u
+        if self.shaft is not None and t_s is not None:
+            self.shaft.command(t_s, alloc.u)
         return CycleResult(
             alloc.u,
             seen.estimate,
@@ -230,7 +262,35 @@ class FtcapCore:
             np.zeros(self.m, dtype=bool) if probe is None else probe > 0,
             estimation_frozen=self.config.mode.estimates and w is None,
             decision=out.decision,
+            shaft=verdict,
         )
+
+    def _diagnose(
+        self, feedback: Sequence[DriveReport], t_s: float, sampled: bool, u_sample: FloatArray
+    ) -> tuple[ShaftVerdict, FloatArray]:
+        """The drives' verdict at ``t_s`` after ``feedback``; on a new estimation sample the
+        motion filter's input: the thrust the measured speeds implied over the interval
+        where a drive reported, the (lagged) command elsewhere."""
+        assert self.shaft is not None
+        for report in feedback:
+            self.shaft.report(report)
+        verdict = self.shaft.verdict(t_s)
+        if sampled:
+            implied = self.shaft.take_thrust_means()
+            implied = implied * verdict.load_factor
+            u_sample = np.where(np.isfinite(implied) & verdict.fresh, implied, u_sample)
+        return verdict, u_sample
+
+    def _motion_confirmed(
+        self, out: StageOutput, verdict: ShaftVerdict, elapsed_s: float | None
+    ) -> BoolArray:
+        """Thrusters the motion alone has kept removed (drive fresh and clean) for
+        ``diagnosis.motion_removal_s``: only then is that removal acted upon."""
+        suspect = verdict.fresh & ~verdict.actionable & (out.delta_alloc < 1.0)
+        dt = self._period_s if elapsed_s is None else elapsed_s
+        self._motion_only_s = np.where(suspect, self._motion_only_s + dt, 0.0)
+        confirmed: BoolArray = self._motion_only_s >= self.config.diagnosis.motion_removal_s
+        return confirmed
 
     def _excite(self, seen: Judged, advance: bool) -> tuple[FloatArray | None, FloatArray | None]:
         """The excitation's preferred command and probe limits (``FTCAP`` mode only; None
@@ -238,7 +298,7 @@ class FtcapCore:
         if self.config.mode is not Mode.FTCAP:
             return None, None
         dead = seen.delta < self.config.allocator.dead_threshold
-        exc = self.excitation(seen.delta, dead, advance=advance)
+        exc = self.excitation(seen.delta, dead, advance=advance, still=seen.no_dither)
         u_pref, probe = exc.u_pref, exc.probe_limit
         if seen.quiet.any():
             u_pref = np.where(seen.quiet, 0.0, u_pref)

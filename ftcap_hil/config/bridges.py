@@ -47,7 +47,8 @@ ENDPOINT_KEYS = (
 def mavlink_endpoint_from(t: Table, default: MavlinkEndpoint) -> MavlinkEndpoint:
     """``connection``, ``peers``, ``system_id``, ``component_id``, ``relay``, ``key_file``,
     ``authorized_systems``, ``bind_all_interfaces``, ``geodetic_origin`` over ``default``."""
-    from bridges.mavlink.config import LinkConfigError, MavlinkEndpoint
+    from bridges.mavlink.config import MavlinkEndpoint
+    from bridges.mavlink.errors import LinkConfigError
 
     authorized = default.authorized_systems
     if t.has("authorized_systems"):

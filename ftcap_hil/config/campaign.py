@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.config.table_dataclass import read_dataclass
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.status import Mode
@@ -218,8 +219,8 @@ def campaign_from(root: Table, base: Path | None = None) -> CampaignSpec:
         faults=_faults(root.table("faults")),
         healthy=healthy,
         duration_s=head.number("duration", None, positive=True),
-        metrics=root.table("metrics").dataclass(
-            MetricParams, choices={"harm_statistic": ("max", "rms")}
+        metrics=read_dataclass(
+            root.table("metrics"), MetricParams, choices={"harm_statistic": ("max", "rms")}
         ),
         base=base,
     )

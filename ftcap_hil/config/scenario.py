@@ -13,6 +13,7 @@ from typing import Any
 
 from ftcap_hil.config.fault_keys import fault_schedule_from
 from ftcap_hil.config.realistic import is_realistic, parse_realistic
+from ftcap_hil.config.table_dataclass import read_dataclass
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
 from ftcap_hil.config.vessel import plant_from
@@ -38,7 +39,9 @@ def core_config_from(root: Table, mode: Mode, k: int, evict_straddling: bool = T
     pose's and the velocities', and the filter tracks the pose too)."""
     root.renamed("allocation", "allocator")
     est_t = root.table("estimator")
-    estimator = est_t.dataclass(EstimatorConfig, defaults={"evict_straddling": evict_straddling})
+    estimator = read_dataclass(
+        est_t, EstimatorConfig, defaults={"evict_straddling": evict_straddling}
+    )
     std = estimator.measurement_std
     sizes = (k, 2 * k) if k == 3 else (k,)
     if std is not None and (len(std) not in sizes or min(std) < 0.0):
@@ -50,10 +53,10 @@ def core_config_from(root: Table, mode: Mode, k: int, evict_straddling: bool = T
     return CoreConfig(
         mode=mode,
         estimator=estimator,
-        allocator=root.table("allocator").dataclass(
-            AllocatorConfig, choices={"backend": available_backends()}
+        allocator=read_dataclass(
+            root.table("allocator"), AllocatorConfig, choices={"backend": available_backends()}
         ),
-        excitation=root.table("excitation").dataclass(ExcitationConfig),
+        excitation=read_dataclass(root.table("excitation"), ExcitationConfig),
     )
 
 

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.config.table_dataclass import read_dataclass
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.effectiveness.geometry import (
@@ -128,8 +129,8 @@ def plant_from(root: Table) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, F
         raise plant_t.error("kind", "'preset' (a vessel preset) is for scenario files only")
     if kind == "linear":
         return _linear(root, plant_t)
-    vessel = plant_t.dataclass(
-        SurfaceVessel, exclude=("k", "state_labels"), choices={"inversion": INVERSIONS}
+    vessel = read_dataclass(
+        plant_t, SurfaceVessel, exclude=("k", "state_labels"), choices={"inversion": INVERSIONS}
     )
     ths = thrusters_from(root.table("vessel", required=True))
     return vessel, ths, effectiveness(ths)

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ftcap_hil.config.bridges import allocator_ports_from
-from ftcap_hil.config.scenario import core_config_from
+from ftcap_hil.config.scenario_tables import core_config_from
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.thruster_curves import limited_to_curves
 from ftcap_hil.config.toml import HIL_DATA, read_toml

@@ -31,7 +31,8 @@ from pathlib import Path
 from typing import Any
 
 from ftcap_hil.config.realistic import is_realistic, parse_realistic
-from ftcap_hil.config.scenario import REPLACEABLE, SHIPPED, scenario_from
+from ftcap_hil.config.scenario import SHIPPED
+from ftcap_hil.config.scenario_tables import REPLACEABLE, scenario_from
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import TomlFile, read_toml, shipped_names
 from ftcap_hil.core.errors import ConfigError

@@ -48,6 +48,19 @@ def read_dataclass(
         raise t.error(None, str(e)) from e
 
 
+def defaults_of(cls: type) -> dict[str, Any]:
+    """The defaults of the dataclass ``cls`` by field name (``default_factory`` called):
+    what a loader falls back to for a key the file leaves out, so that each default is
+    written once, in the dataclass."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if f.default is not dataclasses.MISSING:
+            out[f.name] = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            out[f.name] = f.default_factory()
+    return out
+
+
 def _typed(t: Table, key: str, hint: Any, choices: Sequence[Any] | None) -> Any:
     if types.NoneType in typing.get_args(hint):  # ``X | None``: read as X
         hint = next(a for a in typing.get_args(hint) if a is not types.NoneType)

@@ -45,8 +45,10 @@ def _angle_rad(t: Table) -> float:
 
 
 def thruster_from(t: Table) -> Thruster:
-    """One ``[[vessel.thruster]]`` entry: name, x, y (m), angle_deg (or direction = [dx, dy]),
-    u_min, u_max (N), and optionally rate_max (N/s) or step_max (N per cycle)."""
+    """One ``[[thruster]]`` entry, of a vessel table or a vessel preset alike: ``name``
+    (default ``T<n>``, 1-based), ``x``, ``y`` (m), ``angle_deg`` or ``direction = [dx, dy]``,
+    ``u_min`` <= 0 <= ``u_max`` (N), and optionally ``rate_max`` (N/s) or ``step_max`` (N per
+    cycle), not both."""
     name = t.string("name", f"T{(t.index or 0) + 1}")
     angle = _angle_rad(t)
     thruster = Thruster(
@@ -64,6 +66,16 @@ def thruster_from(t: Table) -> Thruster:
     if thruster.rate_max is not None and thruster.step_max is not None:
         raise t.error(None, "give rate_max or step_max, not both")
     return thruster
+
+
+def thruster_set_from(t: Table) -> ThrusterSet:
+    """The ``[[thruster]]`` array of ``t`` (at least one, :func:`thruster_from` each), with
+    distinct names: the one reader of thruster tables (vessel tables and presets)."""
+    thrusters = tuple(thruster_from(e) for e in t.tables("thruster", required=True))
+    names = [th.name for th in thrusters]
+    if len(set(names)) != len(names):
+        raise t.error("thruster", f"duplicate names in {names}")
+    return ThrusterSet(thrusters)
 
 
 def _preset(t: Table) -> ThrusterSet:
@@ -86,11 +98,7 @@ def thrusters_from(t: Table) -> ThrusterSet:
     ``[[vessel.thruster]]`` (:func:`thruster_from`)."""
     if t.has("preset"):
         return _preset(t)
-    thrusters = tuple(thruster_from(e) for e in t.tables("thruster", required=True))
-    names = [th.name for th in thrusters]
-    if len(set(names)) != len(names):
-        raise t.error("thruster", f"duplicate names in {names}")
-    return ThrusterSet(thrusters)
+    return thruster_set_from(t)
 
 
 def thrusters_from_table(table: Mapping[str, Any], file: str = "vessel file") -> ThrusterSet:

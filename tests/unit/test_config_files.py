@@ -76,6 +76,34 @@ def test_scenario_tables_refuse_unknown_keys(tmp_path: Path, old: str, new: str,
         load_scenario(path)
 
 
+CS2 = (DATA / "scenarios" / "cybership2-station.toml").read_text()
+
+
+@pytest.mark.parametrize("text", [EX1, CS2], ids=["plain", "realistic"])
+def test_estimation_period_s_is_read_in_any_scenario(tmp_path: Path, text: str) -> None:
+    head = "[scenario]\n"
+    assert head in text
+    path = write(tmp_path, "s.toml", text.replace(head, head + "estimation_period_s = 0.0\n", 1))
+    with raises("s.toml: [scenario] estimation_period_s: expected a finite number > 0"):
+        load_scenario(path)
+    dt = load_scenario(write(tmp_path, "ok.toml", text)).dt_s
+    ok = text.replace(head, head + f"estimation_period_s = {5 * dt!r}\n", 1)
+    assert load_scenario(write(tmp_path, "ok.toml", ok)).estimation_period_s == 5 * dt
+    bad = text.replace(head, head + f"estimation_period_s = {2.5 * dt!r}\n", 1)
+    with raises(f"s.toml: [scenario] estimation_period_s: expected a multiple of dt ({dt} s)"):
+        load_scenario(write(tmp_path, "s.toml", bad))
+
+
+@pytest.mark.parametrize("text", [EX1, CS2], ids=["plain", "realistic"])
+def test_the_old_estimation_period_key_is_an_unknown_key(tmp_path: Path, text: str) -> None:
+    head = "[scenario]\n"
+    path = write(tmp_path, "s.toml", text.replace(head, head + "estimation_period = 1.0\n", 1))
+    with raises(
+        "s.toml: [scenario] unknown key 'estimation_period' (did you mean 'estimation_period_s'?)"
+    ):
+        load_scenario(path)
+
+
 def test_linear_scenario_refuses_a_vessel_table(tmp_path: Path) -> None:
     text = (DATA / "scenarios" / "paper-4.1.toml").read_text()
     path = write(tmp_path, "linear.toml", text + '\n[vessel]\npreset = "paper-4.2"\n')

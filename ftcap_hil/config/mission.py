@@ -40,7 +40,7 @@ from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import TomlFile, read_toml, shipped_names
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import Injection, injection_plan
-from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.scenario import Scenario, TimeUnit
 from ftcap_hil.core.status import Mode
 
 MISSIONS = "ftcap_hil.data.hil.missions"
@@ -128,7 +128,7 @@ def mission_from(root: Table, base: Path | None = None) -> Mission:
     else:
         with Table.document(sc_doc) as sc_root:
             sc = scenario_from(sc_root, root)
-    if sc.time_unit != "s":
+    if sc.time_unit is not TimeUnit.SECOND:
         raise head.error("scenario", f"{sc_doc.source!r} is not a vessel scenario")
     name = head.string("name", sc.name)
     mode = head.enum("mode", Mode, exclude=[Mode.ORACLE]) if head.has("mode") else None

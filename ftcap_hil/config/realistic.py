@@ -52,11 +52,13 @@ import numpy as np
 from ftcap_hil.config.presets import AllocatorModel, VesselPreset, apply_mismatch, load_preset
 from ftcap_hil.config.scenario_tables import scenario_from
 from ftcap_hil.config.tables import Table
+from ftcap_hil.config.vessel import PlantKind
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.estimation.config import EstimatorConfig
 from ftcap_hil.core.models.controllers import PoseController
-from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.models.plants import Inversion
+from ftcap_hil.core.scenario import Integrator, Scenario
 from sim.environment import CurrentConfig, Environment, WindConfig
 from sim.sensors import SensorConfig
 from sim.thrusters import ThrusterBankConfig
@@ -68,7 +70,7 @@ OWN_TABLES = ("plant", "conditions", "mismatch", "sensor", "controller")
 def is_realistic(data: dict[str, Any]) -> bool:
     """Whether a scenario document names a vessel preset."""
     plant = data.get("plant")
-    return isinstance(plant, dict) and plant.get("kind") == "preset"
+    return isinstance(plant, dict) and plant.get("kind") == PlantKind.PRESET.value
 
 
 def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
@@ -80,7 +82,7 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     plant_t = root.table("plant", required=True)
     plant_t.allow("kind")
     preset = load_preset(plant_t.string("preset"), seed=seed)
-    inversion = plant_t.choice("inversion", ("euler", "trapezoid"), "trapezoid")
+    inversion = plant_t.enum("inversion", Inversion, Inversion.TRAPEZOID)
     substeps = plant_t.integer("substeps", 4, lo=1)
     plant_t.finish()
     told = _allocator_model(preset, root.table("mismatch"), inversion)
@@ -102,7 +104,7 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
         plant=told.vessel,
         controller=controller,
         core=core,
-        integrator="rk4",
+        integrator=Integrator.RK4,
         rk4_substeps=substeps,
         truth=truth,
         length_m=preset.hull.l_oa_m,
@@ -132,7 +134,7 @@ def _seed(data: dict[str, Any], where: str) -> int:
     return seed
 
 
-def _allocator_model(preset: VesselPreset, mm: Table, inversion: str) -> AllocatorModel:
+def _allocator_model(preset: VesselPreset, mm: Table, inversion: Inversion) -> AllocatorModel:
     """The allocator's model: the preset with the file's mismatch (else the preset's own)."""
     kwargs: dict[str, Any] = {}
     if mm.has("mass"):

@@ -24,10 +24,9 @@ from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.estimation.config import EstimatorConfig
 from ftcap_hil.core.models.controllers import PoseController, StateFeedback
 from ftcap_hil.core.models.plants import LinearPlant
-from ftcap_hil.core.scenario import Scenario, Segment
+from ftcap_hil.core.scenario import Integrator, Scenario, Segment, TimeUnit
 from ftcap_hil.core.status import Mode
 
-INTEGRATORS = ("euler", "rk4")
 REPLACEABLE = ("controller", "reference", "fault")  # tables a mission may give instead
 
 
@@ -85,7 +84,7 @@ def scenario_from(root: Table, mission: Table | None = None) -> Scenario:
     head = root.table("scenario", required=True)
     plant, ths, B = plant_from(root)
     linear = isinstance(plant, LinearPlant)
-    ref_len, x_len, unit = (1, 1, "step") if linear else (3, 6, "s")
+    ref_len, x_len, unit = (1, 1, TimeUnit.STEP) if linear else (3, 6, TimeUnit.SECOND)
     if B.shape[0] != ref_len:
         raise root.error(None, f"B has {B.shape[0]} rows but the plant has {ref_len} inputs")
     reference = tuple(
@@ -111,7 +110,7 @@ def scenario_from(root: Table, mission: Table | None = None) -> Scenario:
         reference=reference,
         faults=fault_schedule_from(own["fault"].tables("fault"), ths.m),
         core=core,
-        integrator=head.choice("integrator", INTEGRATORS, base["integrator"]),
+        integrator=head.enum("integrator", Integrator, base["integrator"]),
         rk4_substeps=head.integer("rk4_substeps", base["rk4_substeps"], lo=1),
         noise_std=noise,
         seed=head.integer("seed", base["seed"], lo=0),

@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import enum
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -27,8 +28,14 @@ from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
 
 PRESETS = ("paper-4.2",)
-PLANT_KINDS = ("linear", "vessel", "preset")
-INVERSIONS = ("euler", "trapezoid")
+
+
+class PlantKind(enum.Enum):
+    """``[plant] kind``: which plant model a file describes."""
+
+    LINEAR = "linear"  # section 4.1, with [actuators]
+    VESSEL = "vessel"  # section 4.2's vessel model, with [vessel]
+    PRESET = "preset"  # a realistic vessel preset (scenario files only, config/realistic.py)
 
 
 def _angle_rad(t: Table) -> float:
@@ -132,14 +139,12 @@ def plant_from(root: Table) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, F
     """``[plant]`` (+ ``[actuators]`` for the linear plant, ``[vessel]`` for the vessel) of a
     file: the plant model, its thrusters and B (k x m)."""
     plant_t = root.table("plant", required=True)
-    kind = plant_t.choice("kind", PLANT_KINDS)
-    if kind == "preset":  # dispatched before this reader: a scenario file's realistic form
+    kind = plant_t.enum("kind", PlantKind)
+    if kind is PlantKind.PRESET:  # dispatched before this reader: a scenario file's realistic form
         raise plant_t.error("kind", "'preset' (a vessel preset) is for scenario files only")
-    if kind == "linear":
+    if kind is PlantKind.LINEAR:
         return _linear(root, plant_t)
-    vessel = read_dataclass(
-        plant_t, SurfaceVessel, exclude=("k", "state_labels"), choices={"inversion": INVERSIONS}
-    )
+    vessel = read_dataclass(plant_t, SurfaceVessel, exclude=("k", "state_labels"))
     ths = thrusters_from(root.table("vessel", required=True))
     return vessel, ths, effectiveness(ths)
 

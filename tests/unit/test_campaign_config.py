@@ -20,6 +20,7 @@ from ftcap_hil.config.campaign import (
 from ftcap_hil.config.scenario import load_scenario, parse_scenario, shipped_scenarios
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.estimation.config import EstimatorKind
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.campaign_faults import random_faults
 from ftcap_hil.runtime.campaign_plan import deep_merge, dumps_toml, plan_campaign
@@ -64,6 +65,15 @@ def test_the_shipped_campaigns_parse_and_plan(tmp_path: Path) -> None:
     plan, _ = plan_campaign(load_campaign("realistic"), tmp_path)
     faulty = [t for t in plan.tasks if not t.healthy]
     assert len(faulty) == 375  # 3 scenarios x 5 kinds x 5 seeds x (none, cap, oracle, 2 ftcap)
+    kinds = {t.variant: t.scenario.core.estimator.kind for t in faulty}
+    assert kinds["ftcap-windowed"] is EstimatorKind.WINDOWED  # estimator = { kind = "windowed" }
+    assert kinds["ftcap"] is EstimatorKind.KALMAN
+
+
+def test_a_variants_bad_estimator_kind_is_refused_when_planning(tmp_path: Path) -> None:
+    text = SMALL.replace("estimator = { prefilter = 0.3 }", 'estimator = { kind = "windowd" }')
+    with pytest.raises(ConfigError, match=r"\[estimator\] kind: 'windowd' is not one of"):
+        plan_campaign(_parse(text), tmp_path)
 
 
 def _typo(table: str, key: str):  # noqa: ANN202

@@ -21,7 +21,7 @@ from ftcap_hil.core.status import Mode
 
 SHIPPED = "ftcap_hil.data.campaigns"
 PLAIN_MODES = {m.value: m for m in Mode if m is not Mode.NONE}
-VARIANT_TABLES = ("estimator", "excitation", "allocator")
+VARIANT_TABLES = ("estimator", "excitation", "allocator", "diagnosis")
 Range = tuple[float, float]
 
 

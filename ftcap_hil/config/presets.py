@@ -22,11 +22,14 @@ from typing import Any
 
 import numpy as np
 
+from ftcap_hil.config.drives import PresetDrives, drives_from
+from ftcap_hil.config.table_dataclass import read_dataclass
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
 from ftcap_hil.config.vessel import thruster_set_from
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet, effectiveness
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.estimation.shaft_types import DiagnosisConfig
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.vessel3dof import DAMPING_KEYS, Vessel3DOF
 from sim.environment import (
@@ -89,6 +92,9 @@ class VesselPreset:
     environment: EnvironmentConfig
     sensors: SensorLevels
     mismatch: Mismatch
+    drives: PresetDrives | None = None  # the thrusters' drives and telemetry (config/drives.py)
+    # [diagnosis] as tuned for this vessel: the defaults of a scenario's own [diagnosis]
+    diagnosis: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def B(self) -> FloatArray:
@@ -200,6 +206,13 @@ def _mismatch(root: Table) -> Mismatch:
     return Mismatch(t.number("mass", 0.0), t.number("damping", 0.0), angles, offsets)
 
 
+def _diagnosis(root: Table) -> dict[str, Any]:
+    """``[diagnosis]``: checked as DiagnosisConfig keys, kept as written."""
+    t = root.table("diagnosis")
+    read_dataclass(t, DiagnosisConfig)
+    return dict(t.data)
+
+
 def load_preset(
     name_or_path: str | Path, overrides: list[str] | None = None, seed: int = 0
 ) -> VesselPreset:
@@ -225,6 +238,8 @@ def load_preset(
             environment=_environment(root, seed),
             sensors=_sensors(root),
             mismatch=_mismatch(root),
+            drives=drives_from(root, hull.rho_water_kg_m3),
+            diagnosis=_diagnosis(root),
         )
     _resolve(preset.thrusters, preset.mismatch, doc.source)
     return preset

@@ -45,10 +45,12 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from ftcap_hil.config.drives import DriveErrors, data_sheet
 from ftcap_hil.config.presets import AllocatorModel, VesselPreset, apply_mismatch, load_preset
 from ftcap_hil.config.scenario_tables import scenario_from
 from ftcap_hil.config.tables import Table
@@ -56,12 +58,13 @@ from ftcap_hil.config.vessel import PlantKind
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.estimation.shaft_types import DriveModel
 from ftcap_hil.core.models.controllers import PoseController
 from ftcap_hil.core.models.plants import Inversion
 from ftcap_hil.core.scenario import Integrator, Scenario
 from sim.environment import CurrentConfig, Environment, WindConfig
 from sim.sensors import SensorConfig
-from sim.thrusters import ThrusterBankConfig
+from sim.thrusters import DEFAULT_PROPELLER, ThrusterBankConfig
 from sim.truth import TruthConfig
 
 OWN_TABLES = ("plant", "conditions", "mismatch", "sensor", "controller")
@@ -85,8 +88,9 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     inversion = plant_t.enum("inversion", Inversion, Inversion.TRAPEZOID)
     substeps = plant_t.integer("substeps", 4, lo=1)
     plant_t.finish()
+    errors = _drive_errors(root.table("mismatch"))
     told = _allocator_model(preset, root.table("mismatch"), inversion)
-    with Table(_common_tables(data, told.thrusters), where) as common:
+    with Table(_common_tables(data, told.thrusters, preset.diagnosis), where) as common:
         sc = scenario_from(common)
     truth, sensor = _truth(preset, root, seed, substeps, sc.dt_s)
     controller = _controller(root.table("controller"), np.diag(told.vessel.mass_matrix))
@@ -108,7 +112,32 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
         rk4_substeps=substeps,
         truth=truth,
         length_m=preset.hull.l_oa_m,
+        drives=_drives_told(preset, truth, errors),
     )
+
+
+def _drive_errors(mm: Table) -> DriveErrors:
+    """``[mismatch]`` ``thrust_coefficient``, ``torque_coefficient``, ``drive_time_constant``:
+    what the drives' data sheets get wrong (fractions, one or one per thruster)."""
+    keys = {"thrust_coefficient": "thrust_coefficient", "torque_coefficient": "torque_coefficient",
+            "drive_time_constant": "time_constant"}  # fmt: skip
+    given: dict[str, tuple[float, ...]] = {}
+    for key, field in keys.items():
+        mm.allow(key)
+        if mm.has(key):
+            value = mm.value(key)
+            given[field] = tuple(float(v) for v in (value if isinstance(value, list) else [value]))
+    return DriveErrors(**given)
+
+
+def _drives_told(
+    preset: VesselPreset, truth: TruthConfig, errors: DriveErrors
+) -> tuple[DriveModel, ...] | None:
+    """The drives' data sheets the allocator is told (None: no telemetry to judge them by)."""
+    if preset.drives is None or truth.feedback is None:
+        return None
+    full = np.maximum(np.abs(preset.thrusters.u_min), np.abs(preset.thrusters.u_max))
+    return data_sheet(preset.drives.actuators, full, truth.bank.time_constant_s, errors)
 
 
 def _told_waves(est: EstimatorConfig, truth: TruthConfig) -> EstimatorConfig:
@@ -159,7 +188,9 @@ def _allocator_model(preset: VesselPreset, mm: Table, inversion: Inversion) -> A
     return dataclasses.replace(told, vessel=vessel)
 
 
-def _common_tables(data: dict[str, Any], thrusters: ThrusterSet) -> dict[str, Any]:
+def _common_tables(
+    data: dict[str, Any], thrusters: ThrusterSet, preset_diagnosis: Mapping[str, Any]
+) -> dict[str, Any]:
     """The document with the preset's tables replaced by a plain vessel the common scenario
     loader reads (its thrusters are the allocator's; its plant is replaced afterwards)."""
     out = {k: copy.deepcopy(v) for k, v in data.items() if k not in OWN_TABLES}
@@ -176,6 +207,7 @@ def _common_tables(data: dict[str, Any], thrusters: ThrusterSet) -> dict[str, An
         ]
     }  # fmt: skip
     out["controller"] = {}
+    out["diagnosis"] = {**preset_diagnosis, **data.get("diagnosis", {})}
     return out
 
 
@@ -194,19 +226,26 @@ def _truth(
     sensors_on = cond.boolean("sensors", True)
     lag_on = cond.boolean("thruster_lag", True)
     quant_on = cond.boolean("quantization", True)
+    telemetry_on = cond.boolean("drive_telemetry", True)
     reverse = cond.number("reverse_gain", 1.0, positive=True)
     deadband = cond.number("deadband_rel", 0.0, lo=0.0, hi=0.5)
     cond.finish()
     ths = preset.thrusters
     u_abs = np.maximum(np.abs(ths.u_min), np.abs(ths.u_max))
+    seeds = np.random.SeedSequence(seed).spawn(3)
+    drives, feedback = preset.drives, None
     bank = ThrusterBankConfig.create(
         ths.m,
         time_constant_s=preset.time_constants_s.tolist() if lag_on else 0.0,
         reverse_gain=reverse,
         deadband_n=(deadband * u_abs).tolist(),
         u_max_abs=u_abs.tolist() if quant_on else None,
+        actuator=drives.actuators if drives is not None else DEFAULT_PROPELLER,
+        full_force_n=u_abs.tolist(),
+        seed=int(seeds[2].generate_state(1)[0]),
     )
-    seeds = np.random.SeedSequence(seed).spawn(2)
+    if drives is not None and telemetry_on:
+        feedback = dataclasses.replace(drives.feedback, seed=int(seeds[2].generate_state(2)[1]))
     sensor = _sensor(preset, root.table("sensor"), int(seeds[1].generate_state(1)[0]), dt_s)
     env = dataclasses.replace(preset.environment, seed=int(seeds[0].generate_state(1)[0]))
     truth = TruthConfig(
@@ -218,6 +257,7 @@ def _truth(
         sensor=sensor if sensors_on else None,
         substeps=substeps,
         seed=int(seeds[0].generate_state(1)[0]),
+        feedback=feedback,
     )
     return truth, truth.sensor
 

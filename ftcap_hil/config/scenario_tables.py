@@ -22,6 +22,7 @@ from ftcap_hil.core.allocation.excitation import ExcitationConfig
 from ftcap_hil.core.allocation.qp import available_backends
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.estimation.shaft_types import DiagnosisConfig
 from ftcap_hil.core.models.controllers import PoseController, StateFeedback
 from ftcap_hil.core.models.plants import LinearPlant
 from ftcap_hil.core.scenario import Integrator, Scenario, Segment, TimeUnit
@@ -31,10 +32,11 @@ REPLACEABLE = ("controller", "reference", "fault")  # tables a mission may give 
 
 
 def core_config_from(root: Table, mode: Mode, k: int, evict_straddling: bool = True) -> CoreConfig:
-    """``[estimator]``, ``[allocator]``, ``[excitation]``: the core's tunables (every key of
-    EstimatorConfig, AllocatorConfig, ExcitationConfig; the backend among those installed;
-    ``measurement_std`` one value per dynamic state, k of them, or for a vessel 2 k: the
-    pose's and the velocities', and the filter tracks the pose too)."""
+    """``[estimator]``, ``[allocator]``, ``[excitation]``, ``[diagnosis]``: the core's tunables
+    (every key of EstimatorConfig, AllocatorConfig, ExcitationConfig, DiagnosisConfig; the
+    backend among those installed; ``measurement_std`` one value per dynamic state, k of
+    them, or for a vessel 2 k: the pose's and the velocities', and the filter tracks the pose
+    too)."""
     root.renamed("allocation", "allocator")
     est_t = root.table("estimator")
     estimator = read_dataclass(
@@ -55,6 +57,7 @@ def core_config_from(root: Table, mode: Mode, k: int, evict_straddling: bool = T
             root.table("allocator"), AllocatorConfig, choices={"backend": available_backends()}
         ),
         excitation=read_dataclass(root.table("excitation"), ExcitationConfig),
+        diagnosis=read_dataclass(root.table("diagnosis"), DiagnosisConfig),
     )
 
 

@@ -161,7 +161,7 @@ class FtcapCore:
         self._unsized = isinstance(self.stage, KalmanStage) and self.config.excitation.info_rate > 0
         self.u_prev = np.zeros(self.m)
         self.shaft: ShaftDiagnoser | None = None
-        if drives is not None and self.config.mode is Mode.FTCAP:
+        if drives is not None and self.config.mode is Mode.FTCAP and self.config.diagnosis.enabled:
             if len(drives) != self.m:
                 raise ValueError(f"drives: expected {self.m} drive models, got {len(drives)}")
             self.shaft = ShaftDiagnoser(drives, self.config.diagnosis)
@@ -235,7 +235,8 @@ class FtcapCore:
             verdict, u_sample = self._diagnose(feedback, t_s, w is not None, u_sample)
         out = self.stage.update(w, u_sample, truth)
         if verdict is not None:
-            ev = ev.with_shaft(verdict, self._motion_confirmed(out, verdict, elapsed_s))
+            confirmed = self._motion_confirmed(out, verdict, elapsed_s)
+            ev = ev.with_shaft(verdict, confirmed, self.config.diagnosis.motion)
         seen = apply_evidence(ev, out, self.config.allocator.dead_threshold, self.B)
         u_pref, probe = self._excite(seen, advance=w is not None)
 

@@ -44,6 +44,7 @@ class Evidence:
     stalled: BoolArray
     shaft: ShaftVerdict | None = None
     motion_confirmed: BoolArray | None = None  # motion-only removals held long enough
+    motion: bool = True  # False: the drives alone decide
 
     @classmethod
     def of(cls, m: int, dead: object | None = None, stalled: object | None = None) -> Evidence:
@@ -57,12 +58,15 @@ class Evidence:
         """Nothing known from outside: every thruster as its estimate says."""
         return cls.of(m)
 
-    def with_shaft(self, verdict: ShaftVerdict, motion_confirmed: BoolArray) -> Evidence:
+    def with_shaft(
+        self, verdict: ShaftVerdict, motion_confirmed: BoolArray, motion: bool = True
+    ) -> Evidence:
         """This evidence with the drives' verdict: actionable shaft losses are allocated at
         the effectiveness the drive shows (times the motion's hull factor), a stuck
         thruster's held force is compensated, and a motion-only removal of a thruster whose
-        drive shows nothing wrong is only advisory until ``motion_confirmed``."""
-        return replace(self, shaft=verdict, motion_confirmed=motion_confirmed)
+        drive shows nothing wrong is only advisory until ``motion_confirmed``. ``motion``
+        False: the drives alone decide (the motion's estimate is reported, never used)."""
+        return replace(self, shaft=verdict, motion_confirmed=motion_confirmed, motion=motion)
 
     @property
     def out(self) -> BoolArray:
@@ -147,14 +151,16 @@ def _with_shaft(
     # the motion alone suspects a thruster whose drive is fresh and clean: advisory
     advisory = v.fresh & ~act & (out.delta_alloc < 1.0) & ~confirmed
     shown = np.where(act, v.delta, 1.0)
-    delta = np.where(advisory, 1.0, out.delta_alloc * shown)
+    base = out.delta_alloc if evidence.motion else np.ones_like(out.delta_alloc)
+    delta = np.where(advisory, 1.0, base * shown)
     held = np.where(stuck & np.isfinite(v.held_n), v.held_n, 0.0)
     est = replace(out.estimate, delta_hat=out.estimate.delta_hat * shown)
     dec = out.decision
     if dec is not None:
-        dec = replace(dec, removed=dec.removed & ~advisory)
+        dec = replace(dec, removed=dec.removed & ~advisory & (evidence.motion | act))
+    bf = out.bf_alloc if evidence.motion else np.zeros_like(out.bf_alloc)
     judged = replace(
-        out, estimate=est, delta_alloc=delta, bf_alloc=out.bf_alloc + B @ held,
-        faulty=out.faulty | act, decision=dec,
+        out, estimate=est, delta_alloc=delta, bf_alloc=bf + B @ held,
+        faulty=(out.faulty if evidence.motion else np.zeros_like(act)) | act, decision=dec,
     )  # fmt: skip
     return judged, stuck, v.alarm | advisory

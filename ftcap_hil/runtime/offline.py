@@ -9,7 +9,7 @@ scenario (the ``none`` run is the reference for the deviation metrics).
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 
 import numpy as np
@@ -60,14 +60,18 @@ def told_sensor_noise(sc: Scenario) -> Scenario:
 
 
 def run_mode(
-    sc: Scenario, mode: Mode, progress: bool = False, exact_faults: bool = True
-) -> RunRecord:
+    sc: Scenario, mode: Mode, progress: bool = False, exact_faults: bool = True,
+    on_core: Callable[[FtcapCore], None] | None = None,
+) -> RunRecord:  # fmt: skip
     """exact_faults: a fault changes at its scheduled time, mid-step if need be, as on a real
     vessel (the paper's 12 s onset falls 0.45 T_s into a step); False applies faults per
-    step (zero-order hold), which hides the sample that straddles an onset."""
+    step (zero-order hold), which hides the sample that straddles an onset. ``on_core`` is
+    handed the core before the run (a bench's instrument: the diagnosis's residual trace)."""
     sc = sc.with_mode(mode)
     drives = sc.drives if sc.truth is not None else None
     core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, told_sensor_noise(sc).core, sc.plant, drives)
+    if on_core is not None:
+        on_core(core)
     faults = FaultSchedule(sc.thrusters.m) if mode is Mode.NONE else sc.faults
     if sc.truth is not None:
         return _run_truth(sc, mode, core, faults, progress)

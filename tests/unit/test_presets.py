@@ -186,6 +186,18 @@ def _write(tmp_path: Path, old: str, new: str) -> Path:
         ),
         ("angle_deg = {}", "angle_deg = { bow_tunel_1 = 2.0 }", r"did you mean 'bow_tunnel_1'"),
         ("speed_m_s = 0.5", "speed_m_s = -0.5", r"current\.speed_m_s: must be finite and >= 0"),
+        (
+            'drive = "speed"',
+            'drive = "sped"',
+            r"\[0\] drive: 'sped' is not one of 'speed', 'torque'",
+        ),
+        (
+            "diameter_m = 2.5",
+            "diameter = 2.5",
+            r"diameter_m: missing \('diameter' is given",
+        ),
+        ("rate_hz = 2.0", "rate = 2.0", r"\[telemetry\] unknown key 'rate'"),
+        ("cusum_h = 23.67", "cusum = 23.67", r"\[diagnosis\] unknown key 'cusum'"),
     ],
 )
 def test_a_bad_preset_names_its_file_table_and_key(
@@ -203,3 +215,30 @@ def test_a_stated_mismatch_is_read_and_overrides_apply() -> None:
     assert p.mismatch.mass == 0.2 and not p.environment.wind.enabled
     model = apply_mismatch(p)
     assert model.vessel.mass_kg == pytest.approx(1.2 * 6.0e6)
+
+
+def test_the_presets_drives_and_their_data_sheet() -> None:
+    """CyberShip II: 60 mm propellers at K_T 0.2816 in fresh water give [SSF04]'s 3.65e-3
+    N/rps^2; rudders are servos; the supply vessel reports at 2 Hz."""
+    from ftcap_hil.config.drives import data_sheet
+    from sim.shaft import Propeller, Servo
+
+    cs2 = load_preset("cybership2")
+    assert cs2.drives is not None
+    prop, rudder = cs2.drives.actuators[0], cs2.drives.actuators[2]
+    assert isinstance(prop, Propeller) and isinstance(rudder, Servo)
+    assert prop.k_t * prop.rho_kgm3 * prop.diameter_m**4 == pytest.approx(3.65e-3, rel=1e-3)
+    full = np.maximum(np.abs(cs2.thrusters.u_min), np.abs(cs2.thrusters.u_max))
+    sheet = data_sheet(cs2.drives.actuators, full, cs2.time_constants_s)
+    assert sheet[0].k_thrust == pytest.approx(3.65e-3, rel=1e-3) and not sheet[2].is_shaft
+    supply = load_preset("supply")
+    assert supply.drives is not None and supply.drives.feedback.rate_hz == 2.0
+    assert supply.diagnosis["latency_s"] == 0.2
+
+
+def test_a_drive_on_some_thrusters_only_is_an_error(tmp_path: Path) -> None:
+    text = resources.files("ftcap_hil.data.vessels").joinpath("supply.toml").read_text()
+    path = tmp_path / "vessel.toml"
+    path.write_text(text.replace('drive = "speed"', "", 1))
+    with pytest.raises(ConfigError, match="every thruster needs a drive once one has"):
+        load_preset(path)

@@ -13,9 +13,9 @@ u / full force) and compares every telemetry sample with it, at the sample's own
                                                       deficit is negative either way round
     r_Q = (I_m - I(n_m)) / sigma_I                    the current against what the load at
                                                       the measured speed draws (A)
-    sigma_T = band_rel |T_p| + band_abs full, and T_m - T_p taken from the nearest
-              prediction within +-(timing_s + timing_rel T_n) (the drive's lag is known
-              no better)
+    sigma_T = band_rel |T_p| + band_abs full, and T_m - T_p taken from the nearest of
+              the predictions with the lag T_n (1 + lag_uncertainty)^(+-1) and within
+              +-timing_s (the drive's lag and the sample's time are known no better)
     sigma_I = current_rel (I(n_m) - I_idle) + current_abs
 
 Each residual feeds two one-sided CUSUMs, S <- max(0, S + |r| - k) on its own side, updated
@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -69,6 +70,20 @@ __all__ = [
 ]
 
 
+@dataclass(frozen=True)
+class ResidualSample:
+    """One healthy, commanded sample's raw residuals: thruster ``index`` at ``t_s``, the
+    predicted thrust (N) and the thrust error outside the prediction's range (N, signed as
+    the thrust), the predicted load current above idle and its error (A, NaN: none)."""
+
+    index: int
+    t_s: float
+    thrust_n: float
+    thrust_error_n: float
+    load_a: float
+    load_error_a: float
+
+
 class ShaftDiagnoser:
     """The module docstring's diagnosis of ``m`` actuators. Call :meth:`command` with every
     command sent, :meth:`feedback` with every telemetry sample, :meth:`verdict` when a
@@ -78,6 +93,9 @@ class ShaftDiagnoser:
         self.config = cfg = config or DiagnosisConfig()
         self._ch = [Channel(mdl, cfg) for mdl in models]
         self.m = len(self._ch)
+        # set to a list to collect the raw residuals of healthy commanded samples, for
+        # fitting the bands on healthy runs (bench/calibrate_shaft.py); None: not kept
+        self.trace: list[ResidualSample] | None = None
 
     def command(self, t_s: float, u: FloatArray) -> None:
         """The commands ``u`` (m,) N sent at ``t_s``: the prediction moves to them."""
@@ -85,40 +103,35 @@ class ShaftDiagnoser:
             ch.advance(t_s)
             ch.ref = ch.reference(ui)
 
-    def feedback(
-        self, t_received_s: float, index: int, speed: float, current_a: float,
-        v_axial: float = 0.0,
-    ) -> None:  # fmt: skip
+    def feedback(self, t_received_s: float, index: int, speed: float, current_a: float) -> None:
         """One drive's report (speed rev/s or deflection, current A) received at
-        ``t_received_s``; it was measured ``latency_s`` earlier. ``v_axial``: the in-flow
-        the allocator estimates (m/s). A sample for an unknown actuator or with a
-        non-finite speed is ignored."""
+        ``t_received_s``; it was measured ``latency_s`` earlier. The in-flow's share of the
+        load is learnt (the channel's load model), not told. A sample for an unknown
+        actuator or with a non-finite speed is ignored."""
         if not (0 <= index < self.m and math.isfinite(speed)):
             return
         ch, cfg = self._ch[index], self.config
         t_s = t_received_s - cfg.latency_s
         t_measured_s = t_received_s
         ch.advance(t_received_s)
-        n_p, t_p, rate = ch.predicted_at(t_s)
-        n_p *= ch.speed_scale
+        speeds = ch.predicted_at(t_s)
+        n_p = ch.speed_scale * speeds[0]
         t_p = ch.open_water(n_p)
-        rate *= ch.speed_scale**2
         mdl = ch.model
         t_m = ch.open_water(speed)
         sigma_t = cfg.band_rel * abs(t_p) + cfg.band_abs * mdl.full_force_n
-        # what the prediction says within +-timing_s (the drive's lag and the sample's time
-        # are known no better): a measurement inside that range is no evidence
-        slack = cfg.timing_s + cfg.timing_rel * mdl.time_constant_s
-        around = [ch.open_water(ch.speed_scale * ch.predicted_at(t_s + d)[0])
-                  for d in (-slack, slack)]  # fmt: skip
+        # what the prediction says for a faster or slower drive, and within +-timing_s:
+        # a measurement inside that range is no evidence
+        shifted = (ch.predicted_at(t_s + d)[0] for d in (-cfg.timing_s, cfg.timing_s))
+        around = [ch.open_water(ch.speed_scale * n) for n in (*speeds[1:], *shifted)]
         lo, hi = min(t_p, *around), max(t_p, *around)
         # in the direction of the predicted thrust: a deficit is negative either way round
         ch.r_t = math.copysign(1.0, t_p) * (t_m - min(max(t_m, lo), hi)) / sigma_t
         ch.t_m, ch.t_p, ch.sig_t = t_m, t_p, sigma_t
-        ch.steady = abs(rate) * mdl.time_constant_s <= 0.1 * abs(t_p)
+        ch.steady = hi - lo <= 0.1 * abs(t_p)
         ch.r_q = math.nan
-        if mdl.is_shaft and mdl.k_torque > 0.0 and math.isfinite(current_a):
-            i_pred = ch.current_at(speed, v_axial, ch.current_scale)
+        if ch.load_visible and math.isfinite(current_a):
+            i_pred = ch.current_at(speed)
             sigma_i = cfg.current_rel * (i_pred - mdl.idle_a) + cfg.current_abs
             ch.r_q = (current_a - i_pred) / sigma_i
             ch.i_m, ch.i_pred, ch.sig_i = current_a, i_pred, sigma_i
@@ -128,6 +141,11 @@ class ShaftDiagnoser:
         ch.thrust_count += 1
         floor = cfg.probe_rel if ch.hyp in NOT_TURNING else cfg.floor_rel
         commanded = abs(t_p) >= floor * mdl.full_force_n
+        if self.trace is not None and commanded and ch.hyp is Hypothesis.HEALTHY:
+            self.trace.append(ResidualSample(
+                index, t_measured_s, t_p, ch.r_t * sigma_t, ch.i_pred - mdl.idle_a,
+                ch.r_q * ch.sig_i if math.isfinite(ch.r_q) else math.nan,
+            ))  # fmt: skip
         self._judge(ch, t_measured_s, speed, n_p, current_a, commanded)
 
     def _judge(
@@ -149,15 +167,18 @@ class ShaftDiagnoser:
             same_way = (n_m / n_p) ** 2 if n_m * n_p > 0.0 else 0.0
             ch.ratio_t += 0.2 * (same_way - ch.ratio_t)
         if math.isfinite(ch.r_q):
-            i_pred = ch.current_at(n_m, 0.0) - ch.model.idle_a
+            i_pred = ch.current_at(n_m) - ch.model.idle_a
             if i_pred > 1e-9:
                 ch.ratio_q += 0.2 * ((current_a - ch.model.idle_a) / i_pred - ch.ratio_q)
         if ch.hyp is Hypothesis.HEALTHY:
             commissioning = ch.seen < cfg.cal_samples
             ch.seen += 1
-            quiet = abs(ch.r_t) < cfg.clear_z and not abs(ch.r_q) > cfg.clear_z
+            quiet = abs(ch.r_t) < cfg.clear_z
+            gap = self._sample_gap(ch)
             if ch.steady and (quiet or commissioning):
-                ch.calibrate(self._sample_gap(ch), n_m, n_p / ch.speed_scale, current_a)
+                ch.calibrate(gap, n_m, n_p / ch.speed_scale)
+            if ch.load_visible and math.isfinite(current_a):
+                ch.load_model.learn(gap, n_m, current_a)  # a static map: any healthy sample
             if commissioning:
                 ch.thrust.reset()  # the tests start on the calibrated model
                 ch.load.reset()
@@ -189,7 +210,7 @@ class ShaftDiagnoser:
         if abs(n_m) < cfg.stall_rel * abs(n_p):
             if not mdl.is_shaft:
                 return Hypothesis.DRIVE_DEAD
-            drawn = ch.current_at(n_p, 0.0) - mdl.idle_a
+            drawn = ch.current_at(n_p) - mdl.idle_a
             if math.isfinite(current_a) and current_a - mdl.idle_a > cfg.jam_current_rel * drawn:
                 return Hypothesis.JAMMED
             return Hypothesis.DRIVE_DEAD
@@ -226,10 +247,11 @@ class ShaftDiagnoser:
                 ch.hyp = Hypothesis.LOAD_LOSS
             elif ch.load.high > h:
                 ch.hyp = Hypothesis.LOAD_GAIN
-        elif ch.hyp in (Hypothesis.WEAK, Hypothesis.VENTILATION) and (
-            ch.thrust.low > h or ch.thrust.high > h
-        ):
-            ch.hyp = self._thrust_cause(ch, n_m, n_p, current_a)
+        elif ch.hyp in (Hypothesis.WEAK, Hypothesis.VENTILATION):
+            if ch.thrust.high > h and not ch.thrust.low > h and not self._flat(ch):
+                ch.thrust.high = 0.0  # more thrust than asked, following the command
+            if ch.thrust.low > h or ch.thrust.high > h:
+                ch.hyp = self._thrust_cause(ch, n_m, n_p, current_a)
 
     def _healthy_fits(self, ch: Channel) -> bool:
         """The last sample is within ``clear_z`` of the healthy prediction and closer to it
@@ -256,9 +278,9 @@ class ShaftDiagnoser:
         r = ch.recent
         return r[-1][0] - r[-2][0] if len(r) >= 2 else 0.0
 
-    def report(self, r: DriveReport, v_axial: float = 0.0) -> None:
+    def report(self, r: DriveReport) -> None:
         """:meth:`feedback` of a :class:`DriveReport`."""
-        self.feedback(r.t_s, r.index, r.speed, r.current_a, v_axial)
+        self.feedback(r.t_s, r.index, r.speed, r.current_a)
 
     def take_thrust_means(self) -> FloatArray:
         """(m,) the mean thrust the measured speeds implied since the last call (N; NaN

@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 from collections import deque
 
+import numpy as np
+
 from ftcap_hil.core.estimation.shaft_types import DiagnosisConfig, DriveModel, Hypothesis
 
 
@@ -27,15 +29,71 @@ class Cusum:
         self.low = self.high = 0.0
 
 
+class LoadModel:
+    """The current a shaft draws, learnt on healthy data as a small Kalman filter of three
+    coefficients (a, c, o) on the data sheet's full-speed load L::
+
+        I - I_idle = L (a nu^3 + c sgn(n) nu^2 + o),  nu = |n| / n_full
+
+    ``a`` is the current sense's scale (within ``cal_limit`` of 1), ``c`` the in-flow's share
+    (the water's axial speed through the propeller, unknown to the allocator: current,
+    vessel speed; within +-0.3), ``o`` the current sense's offset (its drift). Each walks by
+    its prior's size over ``cal_tau_s``; the first samples commission them from the prior."""
+
+    def __init__(self, model: DriveModel, cfg: DiagnosisConfig, n_full: float) -> None:
+        self.cfg, self.idle_a = cfg, model.idle_a
+        self.n_full = max(n_full, 1e-12)
+        self.load_a = 2.0 * math.pi * model.k_torque * self.n_full**3 / model.watts_per_amp
+        self.theta = np.array([1.0, 0.0, 0.0])
+        noise = cfg.current_abs / max(self.load_a, 1e-12)
+        self.R = noise * noise
+        self._prior = np.array([cfg.cal_limit**2, 0.1**2, 4.0 * self.R])  # offset: 2 bands
+        self.P = np.diag(self._prior)
+
+    def _phi(self, n: float) -> np.ndarray:
+        nu = abs(n) / self.n_full
+        return np.array([nu**3, math.copysign(nu * nu, n), 1.0])
+
+    def current(self, n: float) -> float:
+        """The current (A) a healthy shaft at speed ``n`` draws."""
+        return self.idle_a + self.load_a * float(self._phi(n) @ self.theta)
+
+    def learn(self, gap_s: float, n: float, current_a: float) -> None:
+        """One healthy, commanded sample (a static map: steady or not): the coefficients
+        move towards it."""
+        cfg = self.cfg
+        if cfg.cal_tau_s > 0.0:
+            walk = gap_s / cfg.cal_tau_s
+            self.P += np.diag(self._prior * walk)
+        phi = self._phi(n)
+        y = (current_a - self.idle_a) / self.load_a
+        s = float(phi @ self.P @ phi) + self.R
+        gain = self.P @ phi / s
+        # innovations clipped to clear_z of their spread: a fault is learnt no faster than
+        # the coefficients may walk, a bias of the prior is learnt all the same
+        bound = self.cfg.clear_z * math.sqrt(s)
+        innovation = min(max(y - float(phi @ self.theta), -bound), bound)
+        self.theta = self.theta + gain * innovation
+        self.P = self.P - np.outer(gain, phi @ self.P)
+        lo, hi = 1.0 - cfg.cal_limit, 1.0 + cfg.cal_limit
+        a, c, o = self.theta.tolist()
+        self.theta = np.array([min(max(a, lo), hi), min(max(c, -0.3), 0.3), o])
+
+
 class Channel:
     """One actuator's prediction, tests and decision state."""
 
     def __init__(self, model: DriveModel, cfg: DiagnosisConfig) -> None:
         self.model, self.cfg = model, cfg
-        self.n_pred = 0.0  # predicted speed (rev/s) or deflection
+        # predicted speed (rev/s) or deflection under the data sheet's time constant, and
+        # under a faster and a slower one (the lag is known to lag_uncertainty)
+        self.n_pred = [0.0, 0.0, 0.0]
+        spread = 1.0 + cfg.lag_uncertainty
+        tc = model.time_constant_s
+        self._tcs = (tc, tc / spread, tc * spread)
         self.t_pred = 0.0
         self.ref = 0.0
-        self.history: deque[tuple[float, float, float]] = deque()  # (t, n_pred, T_pred)
+        self.history: deque[tuple[float, float, float, float]] = deque()  # (t, 3 speeds)
         self.thrust = Cusum()
         self.load = Cusum()
         self.hyp = Hypothesis.TELEMETRY_LOST
@@ -53,7 +111,13 @@ class Channel:
         self.seen = 0  # commanded samples (the first cal_samples commission the model)
         self.steady = False  # the last sample's prediction was not moving
         self.speed_scale = 1.0  # calibrated on healthy data: true / data-sheet speed
-        self.current_scale = 1.0  # ... and drawn current above idle
+        self.load_model = LoadModel(model, cfg, abs(self.reference(model.full_force_n)))
+        # a load current lost in the sensor's noise says nothing (a small tunnel thruster)
+        self.load_visible = (
+            model.is_shaft
+            and model.k_torque > 0.0
+            and (self.load_model.load_a >= cfg.load_snr * cfg.current_abs)
+        )
         self.recent: deque[tuple[float, float, float]] = deque()  # (t, n_m, n_p) for stuck
         self.thrust_sum, self.thrust_count = 0.0, 0  # implied thrust since the last take
 
@@ -76,17 +140,20 @@ class Channel:
         h = t_s - self.t_pred
         if h <= 0.0:
             return
-        tc = self.model.time_constant_s
-        a = math.exp(-h / tc) if tc > 0.0 else 0.0
-        self.n_pred = self.ref + (self.n_pred - self.ref) * a
+        self.n_pred = [
+            self.ref + (n - self.ref) * (math.exp(-h / tc) if tc > 0.0 else 0.0)
+            for n, tc in zip(self.n_pred, self._tcs, strict=True)
+        ]
         self.t_pred = t_s
-        self.history.append((t_s, self.n_pred, self.open_water(self.n_pred)))
+        n0, n1, n2 = self.n_pred
+        self.history.append((t_s, n0, n1, n2))
         keep = t_s - max(2.0, 4.0 * self.cfg.latency_s + self.cfg.stuck_window_s)
         while len(self.history) > 2 and self.history[1][0] < keep:
             self.history.popleft()
 
     def predicted_at(self, t_s: float) -> tuple[float, float, float]:
-        """(n_p, T_p, dT_p/dt) at ``t_s`` from the history (linear between entries)."""
+        """The three predicted speeds (nominal, fast, slow lag) at ``t_s`` from the
+        history, linear between entries."""
         hist = self.history
         if not hist:
             return 0.0, 0.0, 0.0
@@ -94,23 +161,18 @@ class Channel:
         for entry in hist:
             if entry[0] >= t_s:
                 dt = entry[0] - prev[0]
-                if dt <= 0.0:
-                    return entry[1], entry[2], 0.0
-                w = (t_s - prev[0]) / dt
-                rate = (entry[2] - prev[2]) / dt
-                return prev[1] + w * (entry[1] - prev[1]), prev[2] + w * (entry[2] - prev[2]), rate
+                w = 1.0 if dt <= 0.0 else (t_s - prev[0]) / dt
+                a, b, c = (p + w * (e - p) for p, e in zip(prev[1:], entry[1:], strict=True))
+                return a, b, c
             prev = entry
-        return prev[1], prev[2], 0.0
+        return prev[1], prev[2], prev[3]
 
-    def current_at(self, n: float, v_axial: float, scale: float = 1.0) -> float:
-        """The current (A) the load at speed ``n`` and in-flow ``v_axial`` draws, its part
-        above idle times ``scale`` (the calibration)."""
-        m = self.model
-        q = m.k_torque * (n * abs(n) - abs(n) * v_axial * m.inflow_torque)
-        return scale * 2.0 * math.pi * abs(n * q) / m.watts_per_amp + m.idle_a
+    def current_at(self, n: float) -> float:
+        """The current (A) a healthy shaft at speed ``n`` draws (:class:`LoadModel`)."""
+        return self.load_model.current(n)
 
-    def calibrate(self, gap_s: float, n_m: float, n_p: float, current_a: float) -> None:
-        """Healthy and commanded: move the scales towards what this sample shows."""
+    def calibrate(self, gap_s: float, n_m: float, n_p: float) -> None:
+        """Healthy, commanded and steady: move the speed scale towards this sample."""
         cfg = self.cfg
         if cfg.cal_tau_s <= 0.0 or n_p == 0.0 or n_m * n_p <= 0.0:
             return
@@ -122,9 +184,3 @@ class Channel:
             self.cal_count -= 1
             return
         self.speed_scale = min(max(self.speed_scale + w * (raw_n - self.speed_scale), lo), hi)
-        drawn = self.current_at(n_m, 0.0) - self.model.idle_a
-        if math.isfinite(current_a) and drawn > 1e-9:
-            raw_i = (current_a - self.model.idle_a) / drawn
-            self.current_scale = min(
-                max(self.current_scale + w * (raw_i - self.current_scale), lo), hi
-            )

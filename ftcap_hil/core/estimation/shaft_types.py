@@ -87,14 +87,17 @@ class DiagnosisConfig:
     """Bands, tests and decisions of the module docstring. The bands are residual
     standard deviations fitted on healthy data; ``cusum_*`` in band units."""
 
+    enabled: bool = True  # judge the thrusters by their drives when the drives are known
+    motion: bool = True  # False: the drives alone decide (the motion filter runs, unheard)
     floor_rel: float = 0.1
     probe_rel: float = 0.03  # a thruster that is not turning is judged again from this
     band_rel: float = 0.03
     band_abs: float = 0.005
-    timing_s: float = 0.02  # the prediction's time is known to this (sampling) ...
-    timing_rel: float = 0.5  # ... plus this share of the drive's time constant (its error)
+    timing_s: float = 0.02  # the prediction's time is known to this (sampling)
+    lag_uncertainty: float = 0.5  # the drive's time constant is known within x / (1 + this)
     current_rel: float = 0.03
     current_abs: float = 0.02
+    load_snr: float = 5.0  # the load is judged only where full speed draws this many bands
     cusum_k: float = 1.0
     cusum_h: float = 12.0
     stall_rel: float = 0.1  # |n_m| below this share of the predicted speed: not turning
@@ -113,6 +116,8 @@ class DiagnosisConfig:
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():
+            if isinstance(value, bool):
+                continue
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"diagnosis.{name}: expected a finite number >= 0, got {value!r}")
 

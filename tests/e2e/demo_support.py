@@ -12,8 +12,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from bridges.mavlink.gcs import wait_until
-from ftcap_hil.apps.demo import free_ports
+from ftcap_hil.runtime.processes import free_ports, wait_until
 
 OUR_PROCESSES = ("ftcap_hil", "ftcap-hil")
 

@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 
-from ftcap_hil.apps.demo import free_ports
+from ftcap_hil.runtime.processes import free_ports
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(600)]
 

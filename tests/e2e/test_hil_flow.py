@@ -15,6 +15,7 @@ import pytest
 
 from bridges.mavlink.codec import SystemStatus
 from bridges.mavlink.gcs import MavlinkGcsLink
+from ftcap_hil.runtime.processes import wait_until
 from tests.e2e.rig import (
     RAW_MAX,
     Rig,
@@ -22,7 +23,6 @@ from tests.e2e.rig import (
     record_raw,
     setpoints,
     texts,
-    wait_until,
 )
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]

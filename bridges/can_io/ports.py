@@ -49,6 +49,8 @@ class CanPort:
         return self._transitions["stale"]
 
     def _mark(self, stale: bool, why: str = "") -> None:
+        if stale == self.stale:  # every frame sent or received: no texts to build
+            return
         self._transitions.update(
             "stale", stale, f"{self.name}: port stale: {why}", f"{self.name}: port recovered"
         )

@@ -1,87 +1,80 @@
-"""A bank of m thrusters: commands (N) -> produced forces over time, and their ESC telemetry.
+"""A bank of m actuators: commands (N) -> produced forces over time, and what their drives
+measure (shaft speed or deflection, current).
 
-Per thruster ``i``, per step of ``dt_s`` with the faults (``Truth``) held over the step::
+Per actuator ``i``, per step of ``dt_s`` with the faults (``Truth``) held over the step::
 
     q   = clip(rint(u * 8191 / u_max_abs), -8191, 8191) * u_max_abs / 8191   CAN int14 levels
     q   = 0                              if |q| <= deadband_n       (the ESC does not start)
     c   = g_fwd q  if q >= 0  else  g_rev q        asymmetric thrust of a fixed-pitch propeller
-    c   = 0                              if the ESC is dead (the shaft is not driven)
-    H  <- c + (H - c) exp(-dt/T)         first-order lag dH/dt = (c - H)/T, exact over the step
-    H  <- H                              while ``truth.stuck``: frozen at its onset value
-    F   = delta H + f                    produced force (``f``: a force outside the propeller)
 
-``H`` is the thrust the shaft would give on a healthy propeller; ``u_max_abs = None`` skips
-the quantisation, ``T = 0`` makes the lag instantaneous. With every option off
-(:meth:`ThrusterBankConfig.ideal`) ``F = delta u + f`` exactly, as in ``sim/vessel.py``.
+``c`` is the force a healthy actuator gives in steady state in open water. A **shaft**
+(:class:`~sim.shaft.Propeller`) turns n_ref = sign(c) sqrt(|c| / k_T) through its drive
+with time constant ``T`` and gives T = k_T (n|n| - |n| V_a ...) against the in-flow; a
+**servo** (:class:`~sim.shaft.Servo`, rudders) deflects towards c / full_force_n. The
+produced force is ``F = hull T + f`` (``f`` a force outside the actuator). Physics in
+:mod:`sim.shaft`; with no lag, no in-flow and healthy actuators ``F = c + f`` exactly, and
+:meth:`ThrusterBankConfig.ideal` gives ``F = delta u + f`` as ``sim/vessel.py`` does.
 
-ESC telemetry follows the real shaft through the open-water propeller (Fossen, ch. 9)::
+Each fault's :class:`~ftcap_hil.core.faults.Cause` sets factors on the drive and the
+propeller so that, in steady state in open water, the share of the force reaching the hull
+is the fault's ``delta`` whatever the cause and the drive kind (:func:`signature`)::
 
-    n_cmd = sign(H) sqrt(|H| / (g_dir K_T rho D^4))       shaft speed the command asks, rev/s
-    n     = s n_cmd                                         actual speed
-    T     = k_T g_dir K_T rho D^4 n^2 = delta H             thrust: k_T s^2 = delta
-    Q     = k_Q K_Q rho D^5 n^2                             torque (K_Q the same both ways)
-    rpm   = 60 n,  current = 2 pi |n| Q / (efficiency V) + idle_a
+    cause           speed-drive shaft                   torque-drive shaft  servo
+    weak-motor      n = sqrt(delta) n_ref               torque x delta      deflection x delta
+    lost-blade      K_T, K_Q x delta                    K_T x delta^2, K_Q x delta   lift x delta
+    fouled          K_T x delta, K_Q x (1 + g (1-d))    K_T x delta K_Q             lift x delta
+    drive-dead      not driven: n -> 0 with T, idle current, reports 0 rpm
+    power-lost      not driven, reports nothing
+    jammed          n = 0 at once, current at the drive's limit under command
+    stuck           the state (speed, deflection) frozen at the onset
+    telemetry-lost  healthy, reports nothing
+    ventilation     healthy between bursts; in a burst K_T x (1 - loss), K_Q x (1 - 0.8 loss)
+    hull-loss       healthy shaft, hull x delta
 
-The factors (s, k_T, k_Q) come from each thruster's :class:`ThrusterFault` and delta
-(:func:`signature`), so each fault kind has its own signature at the same command: a weak
-motor turns slower (s = sqrt(delta)); a fouled propeller turns at speed with K_T down and
-K_Q up (more current, less thrust); a lost blade turns at speed with K_T and K_Q down
-together; a stuck thruster reports the rpm of the force it holds; a dead ESC reports
-nothing, or 0 rpm and its idle current (``DeadEsc.ZERO``). A healthy thruster with unit
-gains gives exactly ``sim/esc_model.py``'s rpm and current. Pure, vectorised, no clock.
+Ventilation bursts arrive as a Poisson process of ``ventilation.rate_hz`` per actuator and
+last an exponential time of mean ``ventilation.mean_s`` (seeded). Pure, vectorised, no clock.
 """
 
 from __future__ import annotations
 
-import enum
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ftcap_hil.core.faults import Truth
-from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, IntArray
+from ftcap_hil.core.faults import Cause, Truth
+from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray
+from sim.shaft import (
+    Actuator,
+    Propeller,
+    Servo,
+    StageConstants,
+    current_of,
+    first_order,
+    shaft_thrust,
+    shaft_torque,
+    speed_for,
+    torque_drive_step,
+)
 
+DEFAULT_PROPELLER = Propeller()
 RAW_MAX = 8191  # esc.RawCommand int14, kept symmetric: [-8191, 8191]
-
-
-class ThrusterFault(enum.Enum):
-    """The physical cause behind a thruster's (delta, stuck); it shapes the ESC telemetry."""
-
-    HEALTHY = "healthy"
-    WEAK_MOTOR = "weak-motor"  # the shaft turns slower: s = sqrt(delta)
-    FOULED = "fouled"  # s = 1, K_T * delta, K_Q * (1 + fouled_torque_gain (1 - delta))
-    LOST_BLADE = "lost-blade"  # s = 1, K_T * delta, K_Q * delta
-    STUCK = "stuck"  # output frozen; reports the held force's rpm
-    DEAD_ESC = "dead-esc"  # not driven, no telemetry (or 0 rpm)
-
-
-class DeadEsc(enum.Enum):
-    """What a dead ESC reports."""
-
-    SILENT = "silent"  # nothing
-    ZERO = "zero"  # 0 rpm and the idle current
+__all__ = ["Propeller", "Servo", "ThrusterBank", "ThrusterBankConfig", "Ventilation"]
 
 
 @dataclass(frozen=True)
-class Propeller:
-    """Open-water propeller and drive of one thruster (defaults: ``sim/esc_model.py``'s
-    30 mm model-boat propeller on a 12 V supply)."""
+class Ventilation:
+    """Bursts of lost load (ASSUMED after Smogeli 2006: 30-80 % thrust loss for fractions
+    of a second to seconds when a propeller near the surface draws air in waves)."""
 
-    diameter_m: float = 0.03
-    k_t: float = 0.30
-    k_q: float = 0.05
-    rho_kgm3: float = 1025.0
-    efficiency: float = 0.5
-    voltage_v: float = 12.0
-    idle_a: float = 0.05
+    rate_hz: float = 0.3
+    mean_s: float = 0.5
+    loss: float = 0.6
 
     def __post_init__(self) -> None:
-        for name, value in vars(self).items():
-            low = 0.0 if name == "idle_a" else 1e-12
-            if not (math.isfinite(value) and value >= low):
-                raise ValueError(f"propeller.{name}: expected a finite number > 0, got {value!r}")
+        if not (self.rate_hz >= 0.0 and self.mean_s > 0.0 and 0.0 <= self.loss < 1.0):
+            raise ValueError(f"thrusters.ventilation: bad values {self}")
 
 
 def _per_thruster(value: float | Sequence[float] | FloatArray, m: int, name: str) -> FloatArray:
@@ -94,16 +87,20 @@ def _per_thruster(value: float | Sequence[float] | FloatArray, m: int, name: str
 
 @dataclass(frozen=True)
 class ThrusterBankConfig:
-    """Per-thruster (m,) constants of the module docstring; build with :meth:`create`."""
+    """Per-actuator (m,) constants of the module docstring; build with :meth:`create`.
+    ``full_force_n``: a shaft's force at its top speed (its current limit and a torque
+    drive's inertia scale with it), a servo's at full deflection."""
 
     time_constant_s: FloatArray  # T, s (0: no lag)
     forward_gain: FloatArray  # g_fwd, thrust per commanded N for q >= 0 (> 0)
     reverse_gain: FloatArray  # g_rev, for q < 0 (> 0; 0.6-0.8 for fixed pitch)
     deadband_n: FloatArray  # N, commands with |q| <= deadband_n give no thrust
     u_max_abs: FloatArray | None  # N at raw +-8191; None: no quantisation
-    propellers: tuple[Propeller, ...]
+    actuators: tuple[Actuator, ...]
+    full_force_n: FloatArray
     fouled_torque_gain: float = 1.0
-    dead_esc: DeadEsc = DeadEsc.SILENT
+    ventilation: Ventilation = field(default_factory=Ventilation)
+    seed: int = 0
 
     @classmethod
     def create(
@@ -114,11 +111,14 @@ class ThrusterBankConfig:
         reverse_gain: float | Sequence[float] = 1.0,
         deadband_n: float | Sequence[float] = 0.0,
         u_max_abs: float | Sequence[float] | None = None,
-        propeller: Propeller | Sequence[Propeller] = Propeller(),
+        actuator: Actuator | Sequence[Actuator] = DEFAULT_PROPELLER,
+        full_force_n: float | Sequence[float] | None = None,
         fouled_torque_gain: float = 1.0,
-        dead_esc: DeadEsc = DeadEsc.SILENT,
+        ventilation: Ventilation = Ventilation(),
+        seed: int = 0,
     ) -> ThrusterBankConfig:
-        """Validate and broadcast scalars to the m thrusters; ValueError names the field."""
+        """Validate and broadcast scalars to the m actuators; ValueError names the field.
+        ``full_force_n`` defaults to ``u_max_abs`` (1 N without one)."""
         gains = [_per_thruster(g, m, n) for g, n in ((forward_gain, "forward_gain"),
                                                      (reverse_gain, "reverse_gain"))]  # fmt: skip
         if any(np.any(g <= 0.0) for g in gains):
@@ -126,17 +126,21 @@ class ThrusterBankConfig:
         u_max = None if u_max_abs is None else _per_thruster(u_max_abs, m, "u_max_abs")
         if u_max is not None and np.any(u_max <= 0.0):
             raise ValueError(f"thrusters.u_max_abs: must be > 0, got {u_max.tolist()}")
-        props = (propeller,) * m if isinstance(propeller, Propeller) else tuple(propeller)
-        if len(props) != m:
-            raise ValueError(f"thrusters.propeller: expected 1 or {m} propellers, got {len(props)}")
+        acts = (actuator,) * m if isinstance(actuator, Propeller | Servo) else tuple(actuator)
+        if len(acts) != m:
+            raise ValueError(f"thrusters.actuator: expected 1 or {m} actuators, got {len(acts)}")
+        full = u_max if full_force_n is None else _per_thruster(full_force_n, m, "full_force_n")
+        full = np.ones(m) if full is None else full
+        if np.any(full <= 0.0):
+            raise ValueError(f"thrusters.full_force_n: must be > 0, got {full.tolist()}")
         if not (math.isfinite(fouled_torque_gain) and fouled_torque_gain >= 0.0):
             raise ValueError(
                 f"thrusters.fouled_torque_gain: expected >= 0, got {fouled_torque_gain}"
             )
         return cls(
             _per_thruster(time_constant_s, m, "time_constant_s"), gains[0], gains[1],
-            _per_thruster(deadband_n, m, "deadband_n"), u_max, props, fouled_torque_gain,
-            dead_esc,
+            _per_thruster(deadband_n, m, "deadband_n"), u_max, acts, full,
+            fouled_torque_gain, ventilation, seed,
         )  # fmt: skip
 
     @classmethod
@@ -158,117 +162,95 @@ def quantise(u: FloatArray, u_max_abs: FloatArray) -> FloatArray:
 
 @dataclass(frozen=True)
 class Signature:
-    """Per thruster (m,): shaft speed factor s, K_T and K_Q factors, whether the thruster
-    follows its command and whether its ESC reports (module docstring)."""
+    """Per actuator (m,): the factors of the module docstring's table for one truth."""
 
-    speed: FloatArray
-    k_t: FloatArray
-    k_q: FloatArray
-    responds: BoolArray
+    drive: FloatArray  # weak motor: speed factor (speed drive) / torque factor (torque drive)
+    k_t: FloatArray  # thrust (or lift) coefficient factor
+    k_q: FloatArray  # torque coefficient factor (shafts)
+    hull: FloatArray  # share of the actuator's force that reaches the hull
+    driven: BoolArray  # False: drive dead, power lost, jammed
+    jammed: BoolArray
+    frozen: BoolArray  # stuck: the state holds
     reports: BoolArray
-
-    @property
-    def thrust_factor(self) -> FloatArray:
-        """k_T s^2: thrust over the healthy thrust at the commanded speed."""
-        return np.asarray(self.k_t * self.speed**2)
-
-    @property
-    def torque_factor(self) -> FloatArray:
-        """k_Q s^2: torque over the healthy torque at the commanded speed."""
-        return np.asarray(self.k_q * self.speed**2)
-
-
-_CODE = {kind: i for i, kind in enumerate(ThrusterFault)}
-_KINDS = list(ThrusterFault)
-_HEALTHY, _WEAK, _FOULED, _LOST, _STUCK, _DEAD = (_CODE[k] for k in ThrusterFault)
-
-
-def _cause_codes(truth: Truth, causes: Sequence[ThrusterFault] | None) -> IntArray:
-    """(m,) integer codes of :func:`causes_for` (vectorised: this runs every step)."""
-    if causes is None:
-        d = truth.delta
-        base = np.where(d <= 0.0, _DEAD, np.where(d < 1.0, _WEAK, _HEALTHY))
-    else:
-        base = np.array([_CODE[c] for c in causes])
-    return np.asarray(np.where(truth.stuck, _STUCK, base))
-
-
-def causes_for(truth: Truth, causes: Sequence[ThrusterFault] | None = None) -> list[ThrusterFault]:
-    """Each thruster's cause: STUCK where ``truth.stuck``; else the given cause; else, with
-    none given, DEAD_ESC at delta = 0, WEAK_MOTOR at 0 < delta < 1, HEALTHY at delta = 1."""
-    return [_KINDS[i] for i in _cause_codes(truth, causes).tolist()]
-
-
-def _signature(
-    code: IntArray, delta: FloatArray, fouled_torque_gain: float, dead_esc: DeadEsc
-) -> Signature:
-    d = np.minimum(np.maximum(delta, 0.0), 1.0)
-    fouled, lost, dead = code == _FOULED, code == _LOST, code == _DEAD
-    at_speed = fouled | lost
-    speed = np.where(dead, 0.0, np.where(at_speed, 1.0, np.sqrt(d)))
-    k_q = np.where(fouled, 1.0 + fouled_torque_gain * (1.0 - d), np.where(lost, d, 1.0))
-    responds = ~dead & (code != _STUCK)
-    reports = ~dead | (dead_esc is DeadEsc.ZERO)
-    return Signature(speed, np.where(at_speed, d, 1.0), k_q, responds, reports)
+    ventilating: BoolArray
 
 
 def signature(
-    causes: Sequence[ThrusterFault], delta: FloatArray, fouled_torque_gain: float = 1.0,
-    dead_esc: DeadEsc = DeadEsc.SILENT,
+    causes: Sequence[Cause], delta: FloatArray, torque_drive: BoolArray, is_shaft: BoolArray,
+    fouled_torque_gain: float = 1.0,
 ) -> Signature:  # fmt: skip
-    """The (s, k_T, k_Q, responds, reports) of each thruster (module docstring), (m,) each."""
-    code = np.array([_CODE[c] for c in causes])
-    return _signature(code, np.asarray(delta, dtype=np.float64), fouled_torque_gain, dead_esc)
+    """The module docstring's factors of each actuator, (m,) each."""
+    d = np.minimum(np.maximum(np.asarray(delta, dtype=np.float64), 0.0), 1.0)
+    kind = np.array([c.value for c in causes])
+    weak, lost, fouled = kind == "weak-motor", kind == "lost-blade", kind == "fouled"
+    k_q = np.where(fouled, 1.0 + fouled_torque_gain * (1.0 - d), np.where(lost, d, 1.0))
+    k_q = np.where(is_shaft, k_q, 1.0)
+    lift = np.where(lost | fouled, d, 1.0)
+    k_t = np.where(torque_drive & lost, d * d, np.where(torque_drive & fouled, d * k_q, lift))
+    drive = np.where(weak, np.where(torque_drive | ~is_shaft, d, np.sqrt(d)), 1.0)
+    off = (kind == "drive-dead") | (kind == "power-lost") | (kind == "jammed")
+    silent = (kind == "power-lost") | (kind == "telemetry-lost")
+    return Signature(
+        drive, k_t, k_q, np.where(kind == "hull-loss", d, 1.0), ~off, kind == "jammed",
+        kind == "stuck", ~silent, kind == "ventilation",
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
 class BankOutput:
-    """One step's result, (m,) each: forces in N, telemetry at the end of the step."""
+    """One step's result, (m,) each: forces in N, the drives' state at the end of the step."""
 
-    produced: FloatArray  # F = delta H + f at the end of the step
-    produced_mean: FloatArray  # F averaged over the step (exact for the lag)
-    target: FloatArray  # c: the thrust the command asks of a healthy propeller
-    rpm: FloatArray  # signed shaft speed, rpm (0 where the ESC is dead)
+    produced: FloatArray  # F = hull T + f at the end of the step
+    produced_mean: FloatArray  # F averaged over the step (Simpson on start, middle, end)
+    target: FloatArray  # c: the force the command asks of a healthy actuator
+    speed: FloatArray  # shafts: rev/s; servos: deflection, fraction of full
+    torque: FloatArray  # shafts: N m (0 for servos)
     current_a: FloatArray  # supply current, A
-    reports: BoolArray  # False: this ESC sends nothing
+    reports: BoolArray  # False: this drive sends nothing
     voltage_v: FloatArray
+    is_shaft: BoolArray
+
+    @property
+    def rpm(self) -> FloatArray:
+        """Signed shaft speed in rpm (NaN for servos)."""
+        return np.asarray(np.where(self.is_shaft, 60.0 * self.speed, math.nan))
 
 
 class ThrusterBank:
-    """The m thrusters' state ``H`` (N, (m,)); see the module docstring."""
+    """The m actuators' state: shaft speed (rev/s) or deflection; module docstring."""
 
     def __init__(self, config: ThrusterBankConfig, h0: FloatArray | None = None) -> None:
-        m = config.m
         self.config = config
-        self._h = np.zeros(m) if h0 is None else np.array(h0, dtype=np.float64).reshape(m)
-        props = config.propellers
-        p = {k: np.array([getattr(pr, k) for pr in props]) for k in vars(props[0])}
-        self._thrust_k = p["k_t"] * p["rho_kgm3"] * p["diameter_m"] ** 4  # T / n^2, N s^2
-        self._torque_k = p["k_q"] * p["rho_kgm3"] * p["diameter_m"] ** 5  # Q / n^2
-        self._watts_per_amp = p["efficiency"] * p["voltage_v"]
-        self._idle_a, self._voltage_v = p["idle_a"], p["voltage_v"]
-        self._lag_dt_s = math.nan
-        self._lag = (np.zeros(m), np.zeros(m))
-
-    def _lag_factors(self, dt_s: float) -> tuple[FloatArray, FloatArray]:
-        """(a, b): H_end = c + (H0 - c) a and H_mean = c + (H0 - c) b over a step of dt_s;
-        both 0 without lag. Kept for the last dt_s (the step is usually fixed)."""
-        if dt_s != self._lag_dt_s:
-            tc = self.config.time_constant_s
-            lagged = tc > 0.0
-            a = np.where(lagged, np.exp(-dt_s / np.where(lagged, tc, 1.0)), 0.0)
-            self._lag = (a, np.where(lagged, tc / dt_s * (1.0 - a), 0.0))
-            self._lag_dt_s = dt_s
-        return self._lag
+        self._c = c = StageConstants.of(config.actuators)
+        top = speed_for(c, config.full_force_n)  # rev/s at the full force
+        # torque drive: I = 2 k_Q (n_max / 2) T  (T at half the top speed)
+        self._inertia = c.k_torque * top * config.time_constant_s
+        self._limit_a = c.current_limit_rel * current_of(c, top, c.k_torque * top**2)
+        self._state = np.zeros(self.m)
+        if h0 is not None:
+            self._state = self._state_for(np.array(h0, dtype=np.float64).reshape(self.m))
+        self._rng = np.random.default_rng(config.seed)
+        self._burst_left = np.zeros(self.m)  # s of ventilation burst still to come
 
     @property
     def m(self) -> int:
         return self.config.m
 
+    def _state_for(self, force: FloatArray) -> FloatArray:
+        """The steady state of a healthy actuator giving ``force`` in open water."""
+        servo = force / self.config.full_force_n
+        return np.asarray(np.where(self._c.is_shaft, speed_for(self._c, force), servo))
+
+    def _open_water(self, state: FloatArray) -> FloatArray:
+        """The force a healthy actuator gives at ``state`` in open water, N."""
+        shaft = self._c.k_thrust * state * np.abs(state)
+        return np.asarray(np.where(self._c.is_shaft, shaft, state * self.config.full_force_n))
+
     @property
     def shaft_thrust(self) -> FloatArray:
-        """(m,) H: the thrust each shaft gives on a healthy propeller now, N."""
-        return self._h.copy()
+        """(m,) the force each actuator's state gives on a healthy propeller in open water
+        now, N (a stuck actuator's held force)."""
+        return self._open_water(self._state)
 
     def target(self, u: FloatArray) -> FloatArray:
         """(m,) c of the module docstring for commands ``u`` (m,) N, before faults."""
@@ -282,41 +264,108 @@ class ThrusterBank:
         return np.asarray(np.where(q >= 0.0, cfg.forward_gain * q, cfg.reverse_gain * q))
 
     def step(
-        self, u: FloatArray, truth: Truth, dt_s: float,
-        causes: Sequence[ThrusterFault] | None = None,
-    ) -> BankOutput:  # fmt: skip
+        self, u: FloatArray, truth: Truth, dt_s: float, v_axial: FloatArray | None = None
+    ) -> BankOutput:
         """Advance ``dt_s`` (s) with commands ``u`` (m,) N and ``truth`` held over the step;
-        ``causes`` (m,) per :func:`causes_for`."""
+        ``v_axial`` (m,) m/s: the water's speed through each actuator along its thrust
+        direction (None: open water at rest)."""
         if not (math.isfinite(dt_s) and dt_s > 0.0):
             raise ValueError(f"dt_s: expected a finite positive step, got {dt_s}")
-        cfg = self.config
-        code = _cause_codes(truth, causes)
-        sig = _signature(code, truth.delta, cfg.fouled_torque_gain, cfg.dead_esc)
-        c = np.where(sig.responds | truth.stuck, self.target(u), 0.0)
-        a, b = self._lag_factors(dt_s)
-        h0 = self._h
-        end = np.where(truth.stuck, h0, c + (h0 - c) * a)
-        mean = np.where(truth.stuck, h0, c + (h0 - c) * b)
-        self._h = end
-        rpm, current = self._telemetry(end, sig)
+        c, cfg = self._c, self.config
+        va = np.zeros(self.m) if v_axial is None else np.asarray(v_axial, dtype=np.float64)
+        sig = signature(
+            truth.causes(), truth.delta, c.torque_drive, c.is_shaft, cfg.fouled_torque_gain
+        )
+        target = self.target(u)
+        ref = self._state_for(target)
+        start = self._state
+        end, mid = self._advance(start, ref, sig, va, dt_s)
+        start = np.where(cfg.time_constant_s > 0.0, start, mid)  # no lag: at once
+        self._state = end
+        vent = self._ventilation(sig.ventilating, dt_s)
+        kt, kq = (
+            sig.k_t * (1.0 - cfg.ventilation.loss * vent),
+            sig.k_q * (1.0 - 0.8 * cfg.ventilation.loss * vent),
+        )
+        forces = [self._force(s, va, kt, sig.hull) for s in (start, mid, end)]
+        mean = (forces[0] + 4.0 * forces[1] + forces[2]) / 6.0
+        torque = np.where(c.is_shaft, kq * shaft_torque(c, end, va), 0.0)
         return BankOutput(
-            truth.delta * end + truth.f, truth.delta * mean + truth.f, c, rpm, current,
-            sig.reports, self._voltage_v.copy(),
+            forces[2] + truth.f, mean + truth.f, target, end, torque,
+            self._current(end, torque, ref, kt, sig), sig.reports, c.voltage_v.copy(),
+            c.is_shaft.copy(),
         )  # fmt: skip
 
-    def _telemetry(self, h: FloatArray, sig: Signature) -> tuple[FloatArray, FloatArray]:
-        """(rpm, current in A) of shafts at healthy thrust ``h`` with signature ``sig``."""
-        cfg = self.config
-        gain = np.where(h >= 0.0, cfg.forward_gain, cfg.reverse_gain)
-        n = sig.speed * np.sign(h) * np.sqrt(np.abs(h) / (gain * self._thrust_k))
-        torque = sig.k_q * self._torque_k * n**2
-        current = 2.0 * math.pi * np.abs(n) * torque / self._watts_per_amp
-        return 60.0 * n, current + self._idle_a
+    def _advance(
+        self, s0: FloatArray, ref: FloatArray, sig: Signature, va: FloatArray, dt_s: float
+    ) -> tuple[FloatArray, FloatArray]:
+        """(end, mid) states over the step under the drive's dynamics and the faults."""
+        c, tc = self._c, self.config.time_constant_s
+        speed_ref = np.where(c.torque_drive, ref, ref * sig.drive)
+        goal = np.where(sig.driven, speed_ref, 0.0)
+        end, mid = first_order(s0, goal, tc, dt_s)
+        torque = c.torque_drive & (tc > 0.0)  # without inertia a torque drive is at speed
+        if np.any(torque):
+            q_ref = np.where(sig.driven, sig.drive * c.k_torque * ref * np.abs(ref), 0.0)
+            inertia = np.where(torque, self._inertia, 1.0)
+            load = self._c.k_torque * sig.k_q
+            tend, tmid = _torque_step(c, s0, q_ref, inertia, load, va, dt_s, tc)
+            end, mid = np.where(torque, tend, end), np.where(torque, tmid, mid)
+        frozen = sig.frozen | sig.jammed  # a jammed shaft stops, a jammed servo holds
+        hold = np.where(sig.jammed & c.is_shaft, 0.0, s0)
+        return np.where(frozen, hold, end), np.where(frozen, hold, mid)
+
+    def _force(self, s: FloatArray, va: FloatArray, kt: FloatArray, hull: FloatArray) -> FloatArray:
+        c = self._c
+        shaft = shaft_thrust(c, s, va)
+        force = np.where(c.is_shaft, shaft, s * self.config.full_force_n)
+        return np.asarray(hull * kt * force)
+
+    def _current(
+        self, s: FloatArray, torque: FloatArray, ref: FloatArray, kt: FloatArray,
+        sig: Signature,
+    ) -> FloatArray:  # fmt: skip
+        """Supply current (A): the shaft's power, a jammed drive's limit under command, a
+        servo's hinge load."""
+        c = self._c
+        shaft = current_of(c, s, torque)
+        top = speed_for(c, self.config.full_force_n)
+        pull = np.minimum(np.abs(ref) / (0.05 * top), 1.0)  # a blocked speed loop saturates
+        shaft = np.where(sig.jammed, c.idle_a + (self._limit_a - c.idle_a) * pull, shaft)
+        shaft = np.where(sig.driven | sig.jammed, shaft, c.idle_a)
+        servo = c.idle_a + c.load_a * np.where(sig.jammed, 1.0, np.abs(s) * sig.driven * kt)
+        return np.asarray(np.where(c.is_shaft, shaft, servo))
+
+    def _ventilation(self, active: BoolArray, dt_s: float) -> FloatArray:
+        """(m,) share of the step each actuator spends in a burst (its own draws)."""
+        v = self.config.ventilation
+        share = np.zeros(self.m)
+        if not np.any(active) or v.rate_hz <= 0.0:
+            self._burst_left[:] = 0.0
+            return share
+        draw = self._rng.random(self.m) < v.rate_hz * dt_s
+        starts = active & (self._burst_left <= 0.0) & draw
+        length = self._rng.exponential(v.mean_s, self.m)
+        self._burst_left = np.where(starts, length, self._burst_left)
+        share = np.where(active, np.minimum(self._burst_left, dt_s) / dt_s, 0.0)
+        self._burst_left = np.where(active, np.maximum(self._burst_left - dt_s, 0.0), 0.0)
+        return share
+
+
+def _torque_step(
+    c: StageConstants, s0: FloatArray, q_ref: FloatArray, inertia: FloatArray,
+    load: FloatArray, va: FloatArray, dt_s: float, tc: FloatArray,
+) -> tuple[FloatArray, FloatArray]:  # fmt: skip
+    """The torque drives' (end, mid) with the faults' K_Q factor on the load."""
+    shaped = StageConstants(**{**vars(c), "k_torque": load})
+    sub = float(np.min(np.where(tc > 0.0, tc, np.inf))) / 8.0
+    return torque_drive_step(shaped, s0, q_ref, inertia, va, dt_s, sub)
 
 
 def esc_statuses(out: BankOutput) -> list[EscStatus]:
-    """One ``EscStatus`` per reporting thruster of a step's output (silent ones skipped)."""
+    """One ``EscStatus`` per reporting shaft of a step's output (servos and silent ones
+    skipped)."""
     return [
         EscStatus(int(i), float(out.rpm[i]), float(out.current_a[i]), float(out.voltage_v[i]))
-        for i in np.flatnonzero(out.reports)
+        for i in np.flatnonzero(out.reports & out.is_shaft)
     ]

@@ -14,16 +14,11 @@ from typing import Any
 
 import numpy as np
 
+from ftcap_hil.config.bridges import CanSettings, MavlinkSettings, PortSettings, ZenohSettings
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError, PortError
 from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, Odometry, ThrusterCommand
 from ftcap_hil.ports.mailbox import Stamped
-from ftcap_hil.runtime.port_settings import (
-    CanSettings,
-    MavlinkSettings,
-    PortSettings,
-    ZenohSettings,
-)
 
 
 class VesselPorts:

@@ -5,15 +5,18 @@ forever), and ``delta`` / ``bias`` for all m thrusters (vectors) or for ``thrust
 (1-based) alone (scalars); its time profile is ``kind``: ``step`` (default), ``ramp``,
 ``intermittent``, ``stuck``, ``bias`` (:class:`~ftcap_hil.core.faults.EventKind`).
 ``ramp_s`` (s, > 0) belongs to a ramp, ``on_s`` and ``off_s`` (s, > 0) to an intermittent
-fault, which also needs ``until`` (see ``docs/scenarios.md``).
+fault, which also needs ``until`` (see ``docs/scenarios.md``). ``cause`` (optional) names
+what happened physically (:class:`~ftcap_hil.core.faults.Cause`: ``lost-blade``,
+``jammed``, ...): it decides what the thruster's drive and telemetry show.
 """
 
 from __future__ import annotations
 
 import math
 
+from ftcap_hil.config.table_dataclass import defaults_of
 from ftcap_hil.config.tables import Table
-from ftcap_hil.core.faults import EventKind, FaultEvent, FaultSchedule
+from ftcap_hil.core.faults import Cause, EventKind, FaultEvent, FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 
 PROFILE_KEYS = {EventKind.RAMP: ("ramp_s",), EventKind.INTERMITTENT: ("on_s", "off_s")}
@@ -40,9 +43,13 @@ def fault_event(
         if other not in own and t.has(other):
             raise t.error(other, f"only for kind = {_owner(other)!r}")
     t.allow(*ALL_PROFILE_KEYS)
-    times = {key: t.number(key) for key in own}
+    base = defaults_of(FaultEvent)
+    ramp_s, on_s, off_s = (
+        t.number(k) if k in own else base[k] for k in ("ramp_s", "on_s", "off_s")
+    )
+    cause = t.enum("cause", Cause) if t.has("cause") else base["cause"]
     try:
-        return FaultEvent(start, end, thruster, delta, bias, kind, **times)
+        return FaultEvent(start, end, thruster, delta, bias, kind, ramp_s, on_s, off_s, cause)
     except ValueError as e:
         raise t.error(None, str(e)) from None
 

@@ -11,9 +11,9 @@ output, a bias step. :func:`injection_plan` turns a schedule into the live fault
 for steps, biases and stuck outputs; a ramp becomes steps to its values at the schedule's
 change times (at least its end), and an intermittent
 fault's edges arrive with the injection path's latency. Ramps and intermittent faults are
-meant for the offline simulator and the sim process's own scenario schedule.
-:func:`random_faults` (``ftcap_hil.core.random_faults``) draws schedules for campaigns.
-Pure: no I/O, no clock.
+meant for the offline simulator and the sim process's own scenario schedule. Campaigns
+draw their random faults as scenario ``[[fault]]`` tables
+(:mod:`ftcap_hil.runtime.campaign_faults`). Pure: no I/O, no clock.
 """
 
 from __future__ import annotations
@@ -31,26 +31,73 @@ def _no_flags() -> BoolArray:
     return np.zeros(0, dtype=bool)
 
 
+class Cause(enum.Enum):
+    """What physically happened to a thruster: it decides what its shaft (or servo) and its
+    telemetry show at a given ``delta`` (``sim/thrusters.py`` gives each its signature).
+    ``delta`` keeps its meaning for every cause: the share of the healthy force at the
+    same command that reaches the hull, in steady state."""
+
+    HEALTHY = "healthy"
+    WEAK_MOTOR = "weak-motor"  # the drive cannot give the torque: slower shaft
+    LOST_BLADE = "lost-blade"  # thrust and torque down together at full speed
+    FOULED = "fouled"  # rope or fouling: less thrust for more torque
+    DRIVE_DEAD = "drive-dead"  # not driven: the shaft stops, the ESC reports 0 rpm, idle
+    POWER_LOST = "power-lost"  # not driven and the ESC silent
+    JAMMED = "jammed"  # the shaft is blocked: 0 rpm, the drive at its current limit
+    STUCK = "stuck"  # the output frozen at its onset value (see ``Truth.stuck``)
+    TELEMETRY_LOST = "telemetry-lost"  # works as commanded, reports nothing
+    VENTILATION = "ventilation"  # bursts of lost load in waves: transient, delta 1 between
+    HULL_LOSS = "hull-loss"  # thruster-hull interaction: the shaft is clean, the hull is not
+
+
+# The causes the shaft cannot see (its telemetry is that of a healthy thruster).
+SHAFT_INVISIBLE = frozenset({Cause.HULL_LOSS})
+
+
+def default_cause(delta: float, stuck: bool) -> Cause:
+    """The cause of a fault that names none: STUCK if stuck, else POWER_LOST at delta 0,
+    WEAK_MOTOR below 1, HEALTHY at 1 (a bias alone leaves the shaft healthy)."""
+    if stuck:
+        return Cause.STUCK
+    if delta <= 0.0:
+        return Cause.POWER_LOST
+    return Cause.WEAK_MOTOR if delta < 1.0 else Cause.HEALTHY
+
+
 @dataclass(frozen=True)
 class Truth:
     """The faults actually acting (for the oracle, for metrics and for the thruster bank).
 
     ``delta`` (m,) effectiveness in [0, 1], ``f`` (m,) bias force per thruster in N,
-    ``stuck`` (m,) bool: the thruster holds its onset output (all False when not given)."""
+    ``stuck`` (m,) bool: the thruster holds its onset output (all False when not given),
+    ``cause`` (m,) what happened physically (empty: :func:`default_cause` of each)."""
 
     delta: FloatArray
     f: FloatArray
     stuck: BoolArray = field(default_factory=_no_flags)
+    cause: tuple[Cause, ...] = ()
 
     def __post_init__(self) -> None:
         if self.stuck.shape == (0,) and self.delta.shape != (0,):
             object.__setattr__(self, "stuck", np.zeros(self.delta.shape, dtype=bool))
+        if self.cause and len(self.cause) != self.delta.shape[0]:
+            raise ValueError(f"truth: {len(self.cause)} causes for {self.delta.shape[0]} thrusters")
+
+    def causes(self) -> tuple[Cause, ...]:
+        """(m,) each thruster's cause, the defaults filled in."""
+        stuck = self.stuck.tolist()
+        if self.cause:
+            return tuple(Cause.STUCK if s else c for c, s in zip(self.cause, stuck, strict=True))
+        return tuple(default_cause(d, s) for d, s in zip(self.delta.tolist(), stuck, strict=True))
 
     def effective(self, held: FloatArray) -> Truth:
         """(delta, f) seen from the command: a stuck thruster is ``delta = 0``, ``f = held``
         (the (m,) forces in N it holds, from the thruster bank); ``stuck`` is kept."""
         return Truth(
-            np.where(self.stuck, 0.0, self.delta), np.where(self.stuck, held, self.f), self.stuck
+            np.where(self.stuck, 0.0, self.delta),
+            np.where(self.stuck, held, self.f),
+            self.stuck,
+            self.cause,
         )
 
 
@@ -85,6 +132,7 @@ class FaultEvent:
     ramp_s: float = 0.0
     on_s: float = 0.0
     off_s: float = 0.0
+    cause: Cause | None = None  # what happened physically (None: ``default_cause``)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.start) and self.end > self.start):
@@ -150,6 +198,7 @@ class FaultSchedule:
         each (m,)."""
         delta, f = np.ones(self.m), np.zeros(self.m)
         stuck = np.zeros(self.m, dtype=bool)
+        named: list[Cause | None] = [None] * self.m
         for ev in self.events:
             w = ev.weight(t)
             if w <= 0.0:
@@ -161,7 +210,16 @@ class FaultSchedule:
                 delta[sel] = _blend(delta[sel], ev.delta, w)
             if ev.bias is not None:
                 f[sel] = _blend(f[sel], ev.bias, w)
-        return Truth(delta, f, stuck)
+            if ev.cause is not None:
+                for i in range(self.m) if ev.thruster is None else (ev.thruster,):
+                    named[i] = ev.cause
+        if all(c is None for c in named):
+            return Truth(delta, f, stuck)
+        cause = tuple(
+            default_cause(d, s) if c is None else c
+            for c, d, s in zip(named, delta.tolist(), stuck.tolist(), strict=True)
+        )
+        return Truth(delta, f, stuck, cause)
 
     def change_times(self) -> list[float]:
         """Sorted times at which the truth changes or, for a ramp, starts or stops changing

@@ -30,16 +30,17 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ftcap_hil.config.daemon import DaemonConfig
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
-from ftcap_hil.core.effectiveness.geometry import ThrusterSet
+from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
-from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox
 from ftcap_hil.ports.transitions import TransitionLog, log_to
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.esc_watchdog import EscStallMonitor, EscWatchdog
-from ftcap_hil.runtime.estimation import EstimationSampler, OdometryLimits, newest_odometry
+from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
 from ftcap_hil.runtime.signals import capture_signals
@@ -91,33 +92,6 @@ class Ports:
     def malformed(self) -> int:
         """Malformed inputs dropped so far on every setpoint and telemetry port."""
         return sum(b.malformed for b in self.setpoints) + sum(b.malformed for b in self.telemetry)
-
-
-@dataclass(frozen=True)
-class DaemonConfig:
-    """The daemon's settings: the vessel (thrusters, B (k, m), plant), the core's tunables,
-    the loop rate (Hz), the estimation period and the watchdog timeouts (s)."""
-
-    thrusters: ThrusterSet
-    B: FloatArray
-    plant: SurfaceVessel
-    core: CoreConfig
-    rate_hz: float = 1.0 / 0.2827
-    estimation_period_s: float = 0.2827
-    setpoint_timeout_s: float = 1.0
-    telemetry_timeout_s: float = 1.0
-    esc_timeout_s: float = 0.5
-    status_period_s: float = 0.1
-    wake_on_setpoint: bool = True
-    # time command averages over telemetry intervals by VesselClock (else by receipt stamps)
-    vessel_clock: bool = True
-    dt_clamp: tuple[float, float] = (0.2, 5.0)  # dt for rate limits, in periods (PX4 clamps)
-    # what the vessel can do: odometry beyond it is dropped before the estimator
-    odometry_limits: OdometryLimits = field(default_factory=OdometryLimits)
-    # ESC telemetry as evidence: no rpm (below this) under command for esc_stall_s -> the
-    # thruster is allocated as dead until it turns again (0: off)
-    esc_stall_rpm: float = 50.0
-    esc_stall_s: float = 1.0
 
 
 def _latest(boxes: Sequence[Mailbox[Any]]) -> tuple[Any, int]:
@@ -231,7 +205,7 @@ class AllocatorDaemon:
         is stale (zero thrust)."""
         started = self.loop.clock()
         self.cycles += 1
-        dt = self._dt_s(now)
+        elapsed_s = self._elapsed_s(now)
         setpoint, sp_stamp = _latest(self.ports.setpoints)
         odom, tel_stamp = self._telemetry()
         fresh = self._freshness(now, sp_stamp, tel_stamp)
@@ -256,9 +230,8 @@ class AllocatorDaemon:
                 setpoint.tau,
                 obs,
                 u_sample=u_mean,
-                dt_s=dt,
-                forced_dead=fresh.esc_failed,
-                stalled=self._stalled(now, fresh),
+                elapsed_s=elapsed_s,
+                evidence=self._evidence(now, fresh),
             )
             self._send(result.u, now, started)
             if sp_stamp != self._last_sp_stamp:
@@ -271,6 +244,11 @@ class AllocatorDaemon:
             self._last_status_ns = now
             self._publish(now, fresh)
         return result
+
+    def _evidence(self, now: int, fresh: Freshness) -> Evidence:
+        """What the ESC telemetry says of the thrusters this cycle: dead (silent: the
+        watchdog's ``esc_failed``) and stalled (:meth:`_stalled`)."""
+        return Evidence.of(self.core.m, fresh.esc_failed, self._stalled(now, fresh))
 
     def _stalled(self, now: int, fresh: Freshness) -> BoolArray | None:
         """Thrusters whose ESC reports no rpm under the command they have, on the ESC ages
@@ -302,7 +280,7 @@ class AllocatorDaemon:
         slot = newest_odometry([box.latest() for box in self.ports.telemetry], window_ns)
         return (None, -1) if slot is None else (slot.value, slot.stamp_ns)
 
-    def _dt_s(self, now: int) -> float | None:
+    def _elapsed_s(self, now: int) -> float | None:
         """Seconds since the last cycle, clamped to ``dt_clamp`` periods (None: first)."""
         last, self._last_cycle_ns = self._last_cycle_ns, now
         if last is None:
@@ -372,7 +350,12 @@ class AllocatorDaemon:
         )
 
     def _publish(self, now: int, fresh: Freshness) -> None:
-        st = self.status(now, fresh)
+        try:
+            st = self.status(now, fresh)
+        except MalformedMessage as e:  # a non-finite estimate: nothing to publish, go on
+            self.transitions.update("status", True, f"status not built: {e}", None, Severity.ERROR)
+            return
+        self.transitions.update("status", False, "")
         self.last_status = st
         for sink in self.ports.status:
             name = type(sink).__name__

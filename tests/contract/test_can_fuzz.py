@@ -45,7 +45,7 @@ from bridges.can_io.hub import CanHub
 from ftcap_hil.core.messages import EscStatus, ThrusterCommand
 from ftcap_hil.ports.mailbox import Mailbox
 from ftcap_hil.runtime.processes import wait_until
-from tests.fuzz.payloads import can_frames
+from tests.support.payloads import can_frames
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -15,7 +15,8 @@ import pytest
 
 from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.commands import MavResult
-from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, LinkConfigError, MavlinkEndpoint
+from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.errors import LinkConfigError
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.signing import load_signing_key, signing_timestamp
 from bridges.mavlink.vessel import (
@@ -27,7 +28,7 @@ from bridges.mavlink.vessel import (
 from ftcap_hil.config.bridges import mavlink_endpoint_from
 from ftcap_hil.config.tables import Table
 from ftcap_hil.core.errors import ConfigError
-from tests.contract.mavlink_support import (
+from tests.support.mavlink_peers import (
     DIALECT,
     RawPeer,
     free_udp_ports,

@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 
 from ftcap_hil.runtime.processes import wait_until
-from tests.contract.mavlink_abuse import Pinger, flooded, start_flood
-from tests.contract.mavlink_support import RawPeer
 from tests.e2e.rig import Rig
+from tests.support.mavlink_abuse import Pinger, flooded, start_flood
+from tests.support.mavlink_peers import RawPeer
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(240)]
 

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from bridges.mavlink.allocator_params import tunables_of
+from ftcap_hil.config.daemon import DaemonConfig
 from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
@@ -28,7 +29,7 @@ from ftcap_hil.ports.mailbox import Mailbox, Stamped
 from ftcap_hil.ports.transitions import TransitionLog
 from ftcap_hil.ports.tunables import LiveTunables
 from ftcap_hil.runtime.calls import PendingCalls
-from ftcap_hil.runtime.daemon import AllocatorDaemon, DaemonConfig, Ports
+from ftcap_hil.runtime.daemon import AllocatorDaemon, Ports
 from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.param_sync import ParamSync

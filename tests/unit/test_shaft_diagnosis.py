@@ -1,0 +1,175 @@
+"""Shaft-level diagnosis (core/estimation/shaft.py) against the truth's drives and their
+telemetry (sim/thrusters.py, sim/feedback.py), the diagnoser told a data-sheet model that
+is off as a real one is (K_T +5 %, K_Q +8 %, drive time constant +25 %)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from ftcap_hil.core.estimation.shaft import (
+    DiagnosisConfig,
+    DriveModel,
+    Hypothesis,
+    ShaftDiagnoser,
+    verdict_without_telemetry,
+)
+from ftcap_hil.core.faults import Cause, Truth
+from sim.feedback import FeedbackConfig, FeedbackSensor
+from sim.shaft import Propeller, Servo
+from sim.thrusters import ThrusterBank, ThrusterBankConfig
+
+# CyberShip II's main propeller class: D = 60 mm, fresh water, 4 N at full ahead
+PROP = Propeller(diameter_m=0.06, k_t=0.28, k_q=0.04, rho_kgm3=1000.0, idle_a=0.1)
+FULL, TC, DT = 4.0, 0.1, 0.01
+
+
+def data_sheet(err_kt: float = 1.05, err_kq: float = 1.08, err_tc: float = 1.25) -> DriveModel:
+    k_t = PROP.k_t * PROP.rho_kgm3 * PROP.diameter_m**4 * err_kt
+    k_q = PROP.k_q * PROP.rho_kgm3 * PROP.diameter_m**5 * err_kq
+    return DriveModel(
+        FULL, TC * err_tc, True, k_t, k_q, PROP.efficiency * PROP.voltage_v, PROP.idle_a
+    )
+
+
+@dataclass
+class Run:
+    t: np.ndarray
+    hyp: list[Hypothesis]
+    delta: np.ndarray
+
+    def first(self, after_s: float, hyp: Hypothesis) -> float:
+        """Seconds after ``after_s`` until ``hyp`` is first reported (inf: never)."""
+        hits = [t for t, h in zip(self.t, self.hyp, strict=True) if t >= after_s and h is hyp]
+        return hits[0] - after_s if hits else math.inf
+
+    def at(self, t_s: float) -> tuple[Hypothesis, float]:
+        k = int(np.searchsorted(self.t, t_s))
+        return self.hyp[k], float(self.delta[k])
+
+    def raised_before(self, t_s: float) -> set[Hypothesis]:
+        """What was reported from the first telemetry sample (0.5 s in) to ``t_s``."""
+        return {h for t, h in zip(self.t, self.hyp, strict=True) if 0.5 <= t < t_s}
+
+
+def fly(
+    cause: Cause, delta: float, onset: float = 20.0, end: float = math.inf, T: float = 40.0,
+    seed: int = 0, actuator: Propeller | Servo = PROP, model: DriveModel | None = None,
+) -> Run:  # fmt: skip
+    """One thruster on a slowly varying command (2 +- 1 N, 20 s period, noise), the fault
+    ``cause`` at ``delta`` from ``onset`` to ``end``; the diagnoser's verdict every step."""
+    rng = np.random.default_rng(seed)
+    bank = ThrusterBank(ThrusterBankConfig.create(
+        1, time_constant_s=TC, actuator=actuator, full_force_n=FULL, u_max_abs=FULL, seed=seed,
+    ))  # fmt: skip
+    sensor = FeedbackSensor(FeedbackConfig(seed=seed), 1)
+    diag = ShaftDiagnoser([model or data_sheet()], DiagnosisConfig(latency_s=0.02))
+    ts, hyps, deltas = [], [], []
+    u = 2.0
+    for k in range(int(T / DT)):
+        t = k * DT
+        if k % 10 == 0:
+            u = 2.0 + math.sin(2 * math.pi * t / 20) + rng.normal(0, 0.1)
+        on = onset <= t < end
+        truth = Truth(
+            np.array([delta if on else 1.0]), np.zeros(1),
+            np.array([on and cause is Cause.STUCK]), cause=(cause if on else Cause.HEALTHY,),
+        )  # fmt: skip
+        diag.command(t, np.array([u]))
+        out = bank.step(np.array([u]), truth, DT)
+        for s in sensor.step(t + DT, out):
+            diag.feedback(s.t_delivered_s, s.index, s.speed, s.current_a)
+        v = diag.verdict(t + DT)
+        ts.append(t + DT)
+        hyps.append(v.hypothesis[0])
+        deltas.append(v.delta[0])
+    return Run(np.array(ts), hyps, np.array(deltas))
+
+
+def test_healthy_raises_nothing_on_five_seeds() -> None:
+    for seed in range(5):
+        run = fly(Cause.HEALTHY, 1.0, T=40.0, seed=seed)
+        assert run.raised_before(math.inf) <= {Hypothesis.HEALTHY}, seed
+        assert run.delta.min() == 1.0
+
+
+@pytest.mark.parametrize(
+    ("cause", "delta", "hyp", "within_s"),
+    [
+        (Cause.DRIVE_DEAD, 0.0, Hypothesis.DRIVE_DEAD, 0.5),
+        (Cause.JAMMED, 0.0, Hypothesis.JAMMED, 0.3),
+        (Cause.WEAK_MOTOR, 0.6, Hypothesis.WEAK, 0.6),
+        (Cause.STUCK, 1.0, Hypothesis.STUCK, 3.0),
+        (Cause.LOST_BLADE, 0.6, Hypothesis.LOAD_LOSS, 4.0),  # load changes wait hold_s (3 s)
+        (Cause.TELEMETRY_LOST, 1.0, Hypothesis.TELEMETRY_LOST, 0.6),
+    ],
+)
+def test_each_shaft_visible_fault_is_named(
+    cause: Cause, delta: float, hyp: Hypothesis, within_s: float
+) -> None:
+    run = fly(cause, delta)
+    assert run.raised_before(20.0) <= {Hypothesis.HEALTHY}
+    assert run.first(20.0, hyp) <= within_s
+    assert run.at(39.9)[0] is hyp
+
+
+def test_shown_effectiveness_of_partial_losses() -> None:
+    assert fly(Cause.WEAK_MOTOR, 0.6).at(39.9)[1] == pytest.approx(0.6, abs=0.05)
+    assert fly(Cause.LOST_BLADE, 0.6).at(39.9)[1] == pytest.approx(0.6, abs=0.1)
+    hyp, shown = fly(Cause.JAMMED, 0.0).at(39.9)
+    assert hyp is Hypothesis.JAMMED and shown == 0.0
+
+
+def test_telemetry_lost_is_never_a_loss_and_hull_loss_is_invisible() -> None:
+    lost = fly(Cause.TELEMETRY_LOST, 1.0)
+    assert lost.delta.min() == 1.0
+    hull = fly(Cause.HULL_LOSS, 0.5)
+    assert hull.raised_before(math.inf) <= {Hypothesis.HEALTHY}  # the motion's job
+
+
+def test_ventilation_is_transient_and_never_a_loss() -> None:
+    for seed in range(3):
+        run = fly(Cause.VENTILATION, 1.0, seed=seed)
+        assert run.raised_before(math.inf) <= {Hypothesis.HEALTHY, Hypothesis.VENTILATION}
+        assert run.delta.min() == 1.0
+
+
+@pytest.mark.parametrize(
+    ("cause", "delta"),
+    [(Cause.DRIVE_DEAD, 0.0), (Cause.WEAK_MOTOR, 0.5), (Cause.STUCK, 1.0),
+     (Cause.LOST_BLADE, 0.5)],
+)  # fmt: skip
+def test_a_fault_that_ends_clears_within_seconds(cause: Cause, delta: float) -> None:
+    run = fly(cause, delta, onset=10.0, end=20.0)
+    assert run.at(19.9)[0] is not Hypothesis.HEALTHY
+    assert run.first(20.0, Hypothesis.HEALTHY) < 2.5
+    assert run.at(39.9) == (Hypothesis.HEALTHY, 1.0)
+
+
+def test_a_servo_stuck_or_limp_is_seen_from_its_position() -> None:
+    servo = DriveModel(FULL, TC * 1.25, is_shaft=False)
+    stuck = fly(Cause.STUCK, 1.0, actuator=Servo(), model=servo)
+    assert stuck.first(20.0, Hypothesis.STUCK) <= 3.0
+    limp = fly(Cause.DRIVE_DEAD, 0.0, actuator=Servo(), model=servo)
+    assert limp.first(20.0, Hypothesis.DRIVE_DEAD) <= 0.6
+
+
+def test_no_telemetry_at_all_is_motion_only() -> None:
+    v = verdict_without_telemetry(3)
+    assert v.hypothesis == (Hypothesis.TELEMETRY_LOST,) * 3
+    assert v.delta.tolist() == [1.0] * 3 and not v.alarm.any() and not v.actionable.any()
+
+
+def test_bad_samples_are_ignored_and_bad_settings_name_the_key() -> None:
+    diag = ShaftDiagnoser([data_sheet()])
+    diag.command(0.0, np.array([2.0]))
+    diag.feedback(0.1, 5, 10.0, 0.5)  # no such thruster
+    diag.feedback(0.1, 0, math.nan, 0.5)
+    assert diag.verdict(0.1).hypothesis == (Hypothesis.TELEMETRY_LOST,)
+    with pytest.raises(ValueError, match="diagnosis.cusum_h"):
+        DiagnosisConfig(cusum_h=-1.0)
+    with pytest.raises(ValueError, match="k_thrust"):
+        DriveModel(1.0, 0.1, k_thrust=0.0)

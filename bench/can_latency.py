@@ -18,7 +18,7 @@ Usage: ``python bench/can_latency.py [--samples 2000] [--thrusters 8] [--gap-ms 
 from __future__ import annotations
 
 import argparse
-import subprocess
+import signal
 import sys
 import textwrap
 import threading
@@ -34,6 +34,7 @@ from bridges.can_io.bus import open_can_bus
 from bridges.can_io.codec import decode_frames, encode_raw_command
 from bridges.can_io.force_map import ForceRawMap
 from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.runtime.processes import Child, start_can_hub
 
 WARMUP = 100
 
@@ -115,20 +116,6 @@ def setpoint_mailbox_path(sink: CanThrusterSink, source: CanCommandSource) -> Ca
     return run
 
 
-def start_hub() -> tuple[subprocess.Popen[str], str]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "ftcap_hil", "can-hub", "--port", "0"],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stdout is not None
-    line = proc.stdout.readline()
-    if not line.startswith("can_hub listening on "):
-        proc.kill()
-        raise RuntimeError(f"hub did not start: {line!r}")
-    return proc, line.rsplit(" ", 1)[1].strip()
-
-
 def codec_us(m: int) -> tuple[float, float]:
     raw = list(range(-m, 0))
     n = 2000
@@ -156,11 +143,9 @@ def main() -> int:
 
     fmap = ForceRawMap.create([100.0] * args.thrusters)
     # One bus (virtual channel or hub process) per path, so no path wakes another's reader.
-    hubs = [start_hub() for _ in range(4)]
+    hubs = [start_can_hub() for _ in range(4)]
     channels = [channel for _, channel in hubs]
-    echo = subprocess.Popen(
-        [sys.executable, "-c", ECHO, channels[3]], stdout=subprocess.PIPE, text=True
-    )
+    echo = Child("echo", [sys.executable, "-c", ECHO, channels[3]], stderr="inherit")
     buses: list[can.BusABC] = []
     ports: list[CanThrusterSink | CanCommandSource] = []
 
@@ -169,7 +154,7 @@ def main() -> int:
         return buses[-1]
 
     try:
-        assert echo.stdout is not None and echo.stdout.readline().strip() == "ready"
+        assert echo.next_line(20.0) == "ready"
         paths = []
         for iface, chans in (("virtual", ["v0", "v1", "v2"]), ("canhub", channels)):
             tx, rx = bus(iface, chans[0]), bus(iface, chans[0])
@@ -197,8 +182,8 @@ def main() -> int:
         for b in buses:
             b.shutdown()
         for proc in [echo] + [hub for hub, _ in hubs]:
-            proc.terminate()
-            proc.wait(10.0)
+            proc.stop(signal.SIGTERM, 10.0)
+            proc.close()
     enc, dec = codec_us(args.thrusters)
     print(f"\ncodec only, {args.thrusters} thrusters: encode {enc:.1f} us, decode {dec:.1f} us")
     return 0

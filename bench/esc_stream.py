@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import textwrap
 import time
@@ -24,6 +23,7 @@ from bridges.can_io.adapters import CanThrusterSink
 from bridges.can_io.bus import open_can_bus
 from bridges.can_io.force_map import ForceRawMap
 from bridges.can_io.hub import CanHub
+from ftcap_hil.runtime.processes import Child
 
 CAPTURE = textwrap.dedent(
     """
@@ -44,12 +44,9 @@ CAPTURE = textwrap.dedent(
 def measure(rate_hz: float, seconds: float, m: int, alloc_hz: float) -> dict[str, float]:
     """Gap statistics (ms) of one run at ``rate_hz``."""
     with CanHub(port=0).start() as hub:
-        proc = subprocess.Popen(
-            [sys.executable, "-c", CAPTURE, hub.channel, str(seconds + 1.5)],
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        argv = [sys.executable, "-c", CAPTURE, hub.channel, str(seconds + 1.5)]
+        proc = Child("capture", argv, stderr="inherit")
+        assert proc.next_line(30.0) == "ready"
         with open_can_bus("canhub", hub.channel) as bus:
             sink = CanThrusterSink(bus, ForceRawMap.create([10.0] * m), zero_on_shutdown=False)
             stream = sink.start_stream(rate_hz)
@@ -59,7 +56,12 @@ def measure(rate_hz: float, seconds: float, m: int, alloc_hz: float) -> dict[str
                 k += 1
                 time.sleep(max(0.0, t0 + k / alloc_hz - time.monotonic()))
             sink.shutdown()
-        stamps = json.loads(proc.communicate(timeout=60)[0])
+        with proc:
+            proc.wait(60.0)
+            line = proc.next_line(10.0)
+        if line is None:
+            raise RuntimeError(f"the capture printed no stamps: {proc.output()[-500:]!r}")
+        stamps = json.loads(line)
     gaps = np.diff(np.asarray(stamps[5:-5])) * 1e3  # start-up and shutdown left out
     period = 1e3 / rate_hz
     return {

@@ -17,11 +17,11 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import signal
 import socket
-import subprocess
-import sys
 import threading
 import time
+from pathlib import Path
 
 import can
 import numpy as np
@@ -30,14 +30,9 @@ from bridges.can_io.codec import CanFrame, RawCommandMsg, decode_frames
 from bridges.can_io.hub_bus import CanHubBus
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import WrenchSetpoint
+from ftcap_hil.runtime.processes import Child, free_port, ftcap_argv, start_can_hub
 
 EXTRA_SETS: list[str] = os.environ.get("FTCAP_BENCH_SET", "").split()  # more allocator --set
-
-
-def free_port(kind: int = socket.SOCK_DGRAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class RawCommandTap(can.Listener):
@@ -71,7 +66,7 @@ class RawCommandTap(can.Listener):
 
 def start_allocator(
     hub_channel: str, rate_hz: float, mav_port: int, gcs_port: int, zenoh_port: int, log_path: str
-) -> subprocess.Popen[bytes]:
+) -> Child:
     sets = [
         f'can.channel="{hub_channel}"',
         "can.esc_monitor=false",
@@ -81,31 +76,21 @@ def start_allocator(
         f"daemon.rate_hz={rate_hz}",
         "daemon.setpoint_timeout_s=5.0",
     ]
-    cmd = [sys.executable, "-m", "ftcap_hil", "allocator"]
+    cmd = ftcap_argv("allocator")
     for s in sets:
         cmd += ["--set", s]
-    return subprocess.Popen(cmd, stdout=open(log_path, "wb"), stderr=subprocess.STDOUT)
+    return Child("allocator", cmd, Path(log_path))
 
 
 class HubProcess:
     """The CAN hub in its own process, so its thread does not compete for our GIL."""
 
     def __enter__(self) -> HubProcess:
-        port = free_port(socket.SOCK_STREAM)
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "ftcap_hil", "can-hub", "--port", str(port)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-        )
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline().decode()
-        if "listening" not in line:
-            raise SystemExit(f"can hub did not start: {line!r}")
-        self.channel = f"127.0.0.1:{port}"
+        self.proc, self.channel = start_can_hub()
         return self
 
     def __exit__(self, *exc: object) -> None:
-        stop(self.proc)  # type: ignore[arg-type]
+        stop(self.proc)
 
 
 def connect_zenoh(make, timeout_s: float = 20.0):  # type: ignore[no-untyped-def]
@@ -120,14 +105,10 @@ def connect_zenoh(make, timeout_s: float = 20.0):  # type: ignore[no-untyped-def
             time.sleep(0.5)
 
 
-def stop(proc: subprocess.Popen[bytes]) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+def stop(proc: Child) -> None:
+    """SIGTERM, 10 s to exit, SIGKILL."""
+    proc.stop(signal.SIGTERM, 10.0)
+    proc.close()
 
 
 def measure(send, tap: RawCommandTap, samples: int, amplitude: float) -> np.ndarray:  # type: ignore[no-untyped-def]

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -38,23 +37,21 @@ from bridges.mavlink.config import ALLOCATOR_IDS, MavlinkEndpoint  # noqa: E402
 from bridges.mavlink.peers import TrafficLimits  # noqa: E402
 from bridges.mavlink.signing import passphrase_to_key, signing_timestamp  # noqa: E402
 from ftcap_hil.core.cycle import CoreConfig  # noqa: E402
-from tests.support.mavlink_abuse import Pinger, rss_bytes, udp_drops  # noqa: E402
+from tests.support.mavlink_abuse import (  # noqa: E402
+    Pinger,
+    flooded,
+    rss_bytes,
+    start_flood,
+    udp_drops,
+)
 from tests.support.mavlink_peers import RawPeer, free_udp_ports  # noqa: E402
 
 PASSPHRASE = "ftcap-bench"
 
 
 def _flood(gcs: RawPeer, port: int, rate: float, seconds: float, kind: str, *extra: str) -> int:
-    cmd = [sys.executable, "-m", "tests.support.mavlink_abuse", str(port), str(rate)]
-    proc = subprocess.Popen(
-        [*cmd, str(seconds), kind, *extra], stdout=subprocess.PIPE, text=True, cwd=ROOT
-    )
-    while proc.poll() is None:
-        gcs.pump(0.1)
-    out, _ = proc.communicate()
-    if proc.returncode != 0:
-        raise RuntimeError(f"flooder failed: {kind}")
-    return int(out.split()[-1])
+    proc = start_flood(port, rate, seconds, kind, *extra)
+    return flooded(proc, lambda: gcs.pump(0.1), timeout_s=seconds + 60.0)
 
 
 def _snapshot(link: MavlinkAllocatorLink) -> dict[str, int]:

@@ -31,19 +31,14 @@ from pymavlink import mavutil  # noqa: E402
 from bridges.mavlink import dialect as mavlink_dialect  # noqa: E402
 from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink  # noqa: E402
 from bridges.mavlink.config import ALLOCATOR_IDS, MavlinkEndpoint  # noqa: E402
+from ftcap_hil.runtime.processes import free_ports
 
 WARMUP = 100
 DIALECT = mavlink_dialect.load()
 
 
 def _free_ports(n: int) -> list[int]:
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
-    for s in socks:
-        s.bind(("127.0.0.1", 0))
-    ports = [s.getsockname()[1] for s in socks]
-    for s in socks:
-        s.close()
-    return ports
+    return free_ports(socket.SOCK_DGRAM, n)
 
 
 def _connection(url: str) -> Any:

@@ -37,15 +37,10 @@ from bridges.can_io.bus import open_can_bus  # noqa: E402
 from bridges.can_io.codec import CanFrame, TransferAssembler, encode_raw_command  # noqa: E402
 from bridges.can_io.force_map import ForceRawMap  # noqa: E402
 from bridges.can_io.hub import CanHub  # noqa: E402
+from ftcap_hil.runtime.processes import free_port  # noqa: E402
 from tests.support.payloads import can_frames  # noqa: E402
 
 FMAP = ForceRawMap.create([10.0, 10.0])
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _flooded(n: int) -> tuple[TransferAssembler, int]:
@@ -85,7 +80,7 @@ def reassembly() -> None:
 def restart(restarts: int, outage_s: float) -> None:
     """Recovery time after hub restarts, both sides on ``ReconnectingBus``; the owner of the
     sink behaves as the daemon does (a cycle every 10 ms: take the lapse, send)."""
-    port = _free_port()
+    port = free_port(socket.SOCK_STREAM)
     channel = f"127.0.0.1:{port}"
     hub = CanHub(port=port).start()
     alloc_bus, vessel_bus = open_can_bus("canhub", channel), open_can_bus("canhub", channel)
@@ -192,7 +187,7 @@ def zenoh_fuzz(n: int) -> None:
     """``n`` fuzzed setpoints in rounds of 10^5, RSS after each round."""
     from bridges.zenoh_io.link import ZenohAllocatorLink, make_config
 
-    port = _free_port()
+    port = free_port(socket.SOCK_STREAM)
     with ZenohAllocatorLink(
         "bench", make_config("router", port), wrench_limit=(1e3, 1e3, 1e3)
     ) as a:

@@ -50,6 +50,7 @@ from bridges.zenoh_io.link import (
 )
 from ftcap_hil.core.messages import ThrusterCommand, WrenchSetpoint
 from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.runtime.processes import free_port
 
 VESSEL = "bench"
 WARMUP = 100
@@ -150,10 +151,7 @@ def codec_cost_us(gap_s: float) -> list[str]:
     return lines
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+TCP = socket.SOCK_STREAM
 
 
 def run(samples: int, rate_hz: float, port: int, raw_port: int) -> list[str]:
@@ -237,7 +235,12 @@ def main() -> None:
     lines = (
         codec_cost_us(1.0 / args.rate_hz)
         + [""]
-        + run(args.samples, args.rate_hz, args.port or free_port(), free_port())
+        + run(
+            args.samples,
+            args.rate_hz,
+            args.port or free_port(socket.SOCK_STREAM),
+            free_port(socket.SOCK_STREAM),
+        )
     )
     print("\n".join(lines))
 

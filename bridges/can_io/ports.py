@@ -27,6 +27,7 @@ from bridges.can_io.codec import (
     with_transfer_id,
 )
 from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.ports.transitions import TransitionLog, log_to
 
 log = logging.getLogger(__name__)
 
@@ -40,15 +41,19 @@ class CanPort:
         self._owns_bus = owns_bus
         self._closing = False
         self._closed = False
-        self.stale = False
+        self._transitions = TransitionLog(log_to(log))
+
+    @property
+    def stale(self) -> bool:
+        """The last send or receive failed (and none succeeded since)."""
+        return self._transitions["stale"]
 
     def _mark(self, stale: bool, why: str = "") -> None:
-        if stale != self.stale:
-            self.stale = stale
-            if stale:
-                log.warning("%s: port stale: %s", self.name, why)
-            else:
-                log.info("%s: port recovered", self.name)
+        if stale == self.stale:  # every frame sent or received: no texts to build
+            return
+        self._transitions.update(
+            "stale", stale, f"{self.name}: port stale: {why}", f"{self.name}: port recovered"
+        )
 
     def _close(self) -> None:
         pass

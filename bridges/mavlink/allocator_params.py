@@ -1,12 +1,15 @@
-"""The allocator's MAVLink parameter table (``FTC_*``) and the FTC_MODE codes."""
+"""The allocator's MAVLink parameter table (``FTC_*``), the FTC_MODE codes, and the table
+read as the daemon's :class:`~ftcap_hil.ports.tunables.LiveTunables`."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
-from bridges.mavlink.params import ParamSpec, ParamType
+from bridges.mavlink.params import ParamServer, ParamSpec, ParamType
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.status import Mode
+from ftcap_hil.ports.tunables import LiveTunables
 
 # Modes a running daemon may switch to, by FTC_MODE value (oracle needs the truth: never).
 MODE_CODES = {0: Mode.NONE, 1: Mode.CAP, 2: Mode.FTCAP, 3: Mode.FTCAP_LITERAL}
@@ -56,3 +59,42 @@ def allocator_param_specs(
         _restart_only("FTC_RATE_HZ", rate_hz, 0.1, 2000.0, "loop rate (restart)"),
         _restart_only("FTC_UMAX", u_max_n, 0.0, math.inf, "thruster limit (vessel file)"),
     ]
+
+
+def tunables_of(values: Mapping[str, float]) -> LiveTunables:
+    """The live-settable part of the table ``values`` (by FTC_* name); KeyError for an
+    FTC_MODE code no mode has."""
+    return LiveTunables(
+        mode=MODE_CODES[int(values["FTC_MODE"])],
+        setpoint_timeout_s=values["FTC_SP_TMO"],
+        telemetry_timeout_s=values["FTC_TLM_TMO"],
+        esc_timeout_s=values["FTC_ESC_TMO"],
+        slack_weight=values["FTC_SLACK_W"],
+        effort_weight=values["FTC_EFFORT_W"],
+        dead_threshold=values["FTC_DEAD_THR"],
+        dither_amplitude=values["FTC_DITHER"],
+        probe_interval=int(values["FTC_PROBE_INT"]),
+    )
+
+
+class AllocatorTunables:
+    """A parameter server holding the FTC_* table, read as :class:`LiveTunables`.
+
+    ``generation`` moves on every accepted change (the server's own); ``set_running``
+    tells the server whether the restart-only parameters are refused now.
+    """
+
+    def __init__(self, server: ParamServer) -> None:
+        self._server = server
+
+    @property
+    def generation(self) -> int:
+        return self._server.generation
+
+    def tunables(self) -> LiveTunables:
+        """The table's values now (:func:`tunables_of`)."""
+        return tunables_of(self._server.values())
+
+    def set_running(self, running: bool) -> None:
+        """While running, the restart-only parameters (FTC_WINDOW, ...) are refused."""
+        self._server.set_running(running)

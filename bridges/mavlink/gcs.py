@@ -28,11 +28,11 @@ from __future__ import annotations
 import math
 import queue
 import threading
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from bridges.mavlink.allocator_params import CODE_OF_MODE, MODE_CODES
 from bridges.mavlink.codec import (
     Severity,
     SystemStatus,
@@ -46,12 +46,14 @@ from bridges.mavlink.link import MavlinkPort, PortOwner, Route
 from bridges.mavlink.params import int_from_wire, int_to_wire
 from bridges.mavlink.peers import TrafficLimits
 from bridges.mavlink.vessel import (
+    FAILURE_ENABLE_PARAM,
     FAILURE_TYPE_OF,
     FAILURE_UNIT_SYSTEM_MOTOR,
     MAV_CMD_INJECT_FAILURE,
 )
 from ftcap_hil.core.messages import FaultKind, Odometry, ThrusterCommand, WrenchSetpoint
-from ftcap_hil.core.status import AllocatorStatus
+from ftcap_hil.core.status import AllocatorStatus, Mode
+from ftcap_hil.ports.ground_link import ParamWrite, StatusText
 from ftcap_hil.ports.mailbox import Mailbox, Stamped
 
 Ids = tuple[int, int]
@@ -67,16 +69,6 @@ class Heartbeat:
     mav_type: int
     autopilot: int
     system_status: int
-
-
-@dataclass(frozen=True)
-class StatusText:
-    """One STATUSTEXT (chunks reassembled) and the (system, component) that sent it."""
-
-    system: int
-    component: int
-    severity: Severity
-    text: str
 
 
 @dataclass(frozen=True)
@@ -330,6 +322,28 @@ class MavlinkGcsLink(PortOwner):
                     return self._params[ids][name][0]
         return None
 
+    # --- in the project's terms (ftcap_hil.ports.ground_link.GroundLink) ---
+
+    def allow_fault_injection(self, *, timeout_s: float = 1.0) -> ParamWrite:
+        """SYS_FAILURE_EN = 1 on the vessel, and what it reports back."""
+        name, value = FAILURE_ENABLE_PARAM, 1
+        return ParamWrite(
+            name, value, self.set_param(self.vessel_ids, name, value, timeout_s=timeout_s)
+        )
+
+    def request_mode(self, mode: Mode, *, timeout_s: float = 1.0) -> ParamWrite:
+        """FTC_MODE = ``mode``'s code on the allocator, and what it reports back."""
+        ids, value = self.allocator_ids, CODE_OF_MODE[mode]
+        return ParamWrite(
+            "FTC_MODE", value, self.set_param(ids, "FTC_MODE", value, timeout_s=timeout_s)
+        )
+
+    def read_mode(self, *, timeout_s: float = 2.0) -> Mode | None:
+        """The allocator's mode from its FTC_MODE (None: not reported within ``timeout_s``;
+        KeyError: a code no mode has)."""
+        params = self.fetch_params(self.allocator_ids, timeout_s=timeout_s)
+        return MODE_CODES[int(params["FTC_MODE"])] if "FTC_MODE" in params else None
+
     def drain_statustexts(self) -> list[Stamped[StatusText]]:
         """Every STATUSTEXT received since the last drain, oldest first."""
         out: list[Stamped[StatusText]] = []
@@ -338,13 +352,3 @@ class MavlinkGcsLink(PortOwner):
                 out.append(self.statustexts.get_nowait())
             except queue.Empty:
                 return out
-
-
-def wait_until(predicate: Any, timeout_s: float, poll_s: float = 0.01) -> bool:
-    """Poll ``predicate()`` until true or ``timeout_s`` passes (for scripts and tests)."""
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(poll_s)
-    return True

@@ -41,6 +41,8 @@ from bridges.zenoh_io.config import (
     shipped_config_path,
 )
 from ftcap_hil.core.errors import MalformedMessage, PortError
+from ftcap_hil.core.status import Severity
+from ftcap_hil.ports.transitions import TransitionLog, log_to
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -115,6 +117,11 @@ def _get_json(conf: zenoh.Config, key: str) -> Any:
         return None
 
 
+def _debug(text: str, _severity: Severity) -> None:
+    """Where a port's changes held back by :data:`LOG_INTERVAL_S` go."""
+    log.debug("%s", text)
+
+
 def _matched(publisher: zenoh.Publisher) -> bool:
     # typed bool in the stubs, but zenoh 1.x returns a MatchingStatus (always truthy)
     status = publisher.matching_status
@@ -169,8 +176,9 @@ class ZenohLink:
         self.decode_errors = 0  # samples a decoder failed on with other than MalformedMessage
         self._entities: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._failing: set[str] = set()  # ports whose last message failed: log transitions only
-        self._log_state: dict[str, tuple[int | None, int]] = {}  # key -> (last line, not logged)
+        # a port whose last message failed is on; a port that keeps flipping logs one line
+        # per LOG_INTERVAL_S, the changes in between at debug level
+        self._failing = TransitionLog(log_to(log), min_interval_s=LOG_INTERVAL_S, quiet=_debug)
         self._closed = False
         self._close_lock = threading.Lock()
         try:
@@ -198,7 +206,7 @@ class ZenohLink:
                 self._transition(key, failed=True, detail=detail)
                 return
             sink.put(value)
-            if key in self._failing:
+            if self._failing[key]:
                 self._transition(key, failed=False, detail="valid samples again")
 
         self._entities.append(self._session.declare_subscriber(key, on_sample))
@@ -236,7 +244,7 @@ class ZenohLink:
         except zenoh.ZError as e:
             self._fail(key, f"publish failed: {e}")
             return False
-        if key in self._failing:
+        if self._failing[key]:
             self._transition(key, failed=False, detail="publishing again")
         return True
 
@@ -248,22 +256,9 @@ class ZenohLink:
         """Log a port's change between failing and working; a port that keeps flipping
         (valid and malformed samples interleaved) logs at most once per
         :data:`LOG_INTERVAL_S`, the next line saying how many changes it did not log."""
-        if failed == (key in self._failing):
-            log.debug("%s: %s", key, detail)
-            return
-        if failed:
-            self._failing.add(key)
-        else:
-            self._failing.discard(key)
-        now = time.monotonic_ns()
-        last, quiet = self._log_state.get(key, (None, 0))
-        if last is not None and now - last < LOG_INTERVAL_S * 1e9:
-            self._log_state[key] = (last, quiet + 1)
-            log.debug("%s: %s", key, detail)
-            return
-        self._log_state[key] = (now, 0)
-        more = f" ({quiet} changes not logged since the last line)" if quiet else ""
-        (log.warning if failed else log.info)("%s: %s%s", key, detail, more)
+        text = f"{key}: {detail}"
+        if not self._failing.update(key, failed, text, text):
+            log.debug("%s", text)
 
     def subscribers_matched(self, key: str | None = None, timeout_s: float = 0.0) -> bool:
         """True once the publisher on ``key`` (None: every publisher of this link) has a

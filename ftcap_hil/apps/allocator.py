@@ -13,10 +13,10 @@ import logging
 import time
 from pathlib import Path
 
+from ftcap_hil.apps.allocator_ports import build_ports
 from ftcap_hil.apps.options import add_set_option
 from ftcap_hil.config.daemon import LoadedConfig, load_daemon_config
 from ftcap_hil.core.errors import ConfigError, FtcapError, PortError
-from ftcap_hil.runtime.allocator_ports import build_ports
 from ftcap_hil.runtime.command_log import CommandLog
 from ftcap_hil.runtime.daemon import AllocatorDaemon
 from ftcap_hil.runtime.param_sync import ParamSync

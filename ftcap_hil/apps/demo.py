@@ -25,32 +25,34 @@ mission, 130 if interrupted.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import logging
 import math
-import os
-import re
-import signal
 import socket
-import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.runtime.loop import DeadlineLoop
+from ftcap_hil.runtime.processes import (
+    LOCALHOST,
+    Child,
+    Supervisor,
+    free_ports,
+    ftcap_argv,
+    start_can_hub,
+)
 from ftcap_hil.runtime.signals import SignalCapture, capture_signals
 
 log = logging.getLogger(__name__)
 
-LOCALHOST = "127.0.0.1"
 DEFAULT_MISSION = "paper-4.2-ex1-short"
 PAPER_MISSION = "paper-4.2-ex1"
 STOP_GRACE_S = 8.0
-HUB_READY = re.compile(r"can_hub listening on 127\.0\.0\.1:(\d+)")
+HUB_TIMEOUT_S = 15.0
 SUPERVISE_PERIOD_NS = 200_000_000
 
 
@@ -64,113 +66,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--mission", help="a mission file or shipped name (see `ftcap-hil gcs -h`)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-
-
-@dataclass
-class Child:
-    name: str
-    proc: subprocess.Popen[bytes]
-    log_path: Path
-    log_fh: IO[bytes]
-    killed: bool = False  # needed SIGKILL
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-
-@dataclass
-class Supervisor:
-    """Children started in order, stopped newest first; every stop is by PID. After
-    :meth:`hurry` (a second stop signal) a child gets no grace period."""
-
-    log_dir: Path
-    children: list[Child] = field(default_factory=list)
-    hurried: bool = False
-
-    def start(self, name: str, argv: list[str]) -> Child:
-        path = self.log_dir / f"{name}.log"
-        fh = open(path, "wb")  # noqa: SIM115 - closed in stop_all
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        proc = subprocess.Popen(
-            argv,
-            stdin=subprocess.DEVNULL,
-            stdout=fh,
-            stderr=subprocess.STDOUT,
-            env=env,
-            start_new_session=True,  # Ctrl-C reaches the demo only; it stops the children
-        )
-        child = Child(name, proc, path, fh)
-        self.children.append(child)
-        log.info("started %s (pid %d): %s", name, proc.pid, " ".join(argv[1:]))
-        self._write_pids()
-        return child
-
-    def _write_pids(self) -> None:
-        pids = {c.name: c.pid for c in self.children}
-        tmp = self.log_dir / "pids.json.tmp"
-        tmp.write_text(json.dumps(pids, indent=2))
-        tmp.replace(self.log_dir / "pids.json")  # atomic: a reader never sees half a file
-
-    def died(self, exclude: Child | None = None) -> Child | None:
-        return next(
-            (c for c in self.children if c is not exclude and c.proc.poll() is not None), None
-        )
-
-    def hurry(self) -> None:
-        """Signal-handler safe: from now on, SIGKILL without waiting."""
-        self.hurried = True
-
-    def _ended(self, child: Child, grace_s: float) -> bool:
-        """Whether ``child`` exits within ``grace_s`` (less once hurried)."""
-        deadline = time.monotonic() + grace_s
-        while not self.hurried and (left := deadline - time.monotonic()) > 0:
-            try:
-                child.proc.wait(min(left, 0.1))
-                return True
-            except subprocess.TimeoutExpired:
-                pass
-        return child.proc.poll() is not None
-
-    def stop(self, child: Child, grace_s: float = STOP_GRACE_S) -> None:
-        if child.proc.poll() is None:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(child.pid, signal.SIGTERM)
-            if not self._ended(child, grace_s):
-                why = (
-                    "second stop signal" if self.hurried else f"ignored SIGTERM for {grace_s:.0f} s"
-                )
-                log.warning("%s (pid %d): %s: SIGKILL", child.name, child.pid, why)
-                child.killed = True
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(child.pid, signal.SIGKILL)
-                child.proc.wait()
-        child.log_fh.close()
-
-    def stop_all(self) -> None:
-        for child in reversed(self.children):
-            self.stop(child)
-
-    def failures(self) -> list[str]:
-        out = []
-        for c in self.children:
-            code = c.proc.returncode
-            if c.killed or code != 0:
-                how = "needed SIGKILL" if c.killed else f"exit code {code}"
-                out.append(f"{c.name} (pid {c.pid}): {how}, see {c.log_path}")
-        return out
-
-
-def free_ports(kind: int, n: int) -> list[int]:
-    """n distinct free ports on 127.0.0.1 (all held open together while picking)."""
-    socks = [socket.socket(socket.AF_INET, kind) for _ in range(n)]
-    try:
-        for s in socks:
-            s.bind((LOCALHOST, 0))
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
 
 
 @dataclass(frozen=True)
@@ -187,10 +82,6 @@ class Ports:
         return cls(gcs, allocator, vessel, free_ports(socket.SOCK_STREAM, 1)[0])
 
 
-def _cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "ftcap_hil", *args]
-
-
 def allocator_argv(p: Ports) -> list[str]:
     zenoh_listen = f"['listen/endpoints:[\"tcp/{LOCALHOST}:{p.zenoh}\"]']"
     sets = [
@@ -200,7 +91,7 @@ def allocator_argv(p: Ports) -> list[str]:
         f'mavlink.relay=["{LOCALHOST}:{p.vessel}"]',  # a ground station on one link sees both
         f"zenoh.overrides={zenoh_listen}",
     ]
-    return _cli("allocator", *[a for s in sets for a in ("--set", s)])
+    return ftcap_argv("allocator", *[a for s in sets for a in ("--set", s)])
 
 
 def vessel_argv(p: Ports) -> list[str]:
@@ -210,11 +101,11 @@ def vessel_argv(p: Ports) -> list[str]:
         f'mavlink.peers=["{LOCALHOST}:{p.allocator}", "{LOCALHOST}:{p.gcs}"]',
         f"zenoh.connect=tcp/{LOCALHOST}:{p.zenoh}",
     ]
-    return _cli("sim", *[a for s in sets for a in ("--set", s)])
+    return ftcap_argv("sim", *[a for s in sets for a in ("--set", s)])
 
 
 def gcs_argv(p: Ports, mission: str, out: Path, duration: float | None, plots: bool) -> list[str]:
-    argv = _cli(
+    argv = ftcap_argv(
         "gcs",
         "--mission",
         mission,
@@ -230,18 +121,6 @@ def gcs_argv(p: Ports, mission: str, out: Path, duration: float | None, plots: b
     if duration is not None:
         argv += ["--duration", repr(duration)]
     return argv + ([] if plots else ["--no-plots"])
-
-
-def wait_for_hub(child: Child, stop: StopRequest, timeout_s: float = 15.0) -> int:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        stop.check()
-        if match := HUB_READY.search(child.log_path.read_text(errors="replace")):
-            return int(match.group(1))
-        if child.proc.poll() is not None:
-            break
-        time.sleep(0.05)
-    raise RuntimeError(f"the CAN hub did not come up within {timeout_s:g} s, see {child.log_path}")
 
 
 class Interrupted(Exception):
@@ -280,7 +159,7 @@ def supervise(
         if (dead := sup.died(exclude=gcs)) is not None:
             raise RuntimeError(
                 f"{dead.name} (pid {dead.pid}) exited early with code "
-                f"{dead.proc.returncode}, see {dead.log_path}"
+                f"{dead.returncode}, see {dead.log_path}"
             )
         elapsed = time.monotonic() - started
         if elapsed > budget_s:
@@ -289,7 +168,7 @@ def supervise(
             sys.stdout.write(f"\rdemo: {elapsed:5.0f} s of about {expected_s:.0f} s\x1b[K")
             sys.stdout.flush()
 
-    loop.run(tick, until=lambda: gcs.proc.poll() is not None)
+    loop.run(tick, until=lambda: not gcs.running())
     if tty:
         sys.stdout.write("\r\x1b[K")
     stop.check()
@@ -298,9 +177,10 @@ def supervise(
 def start_all(
     sup: Supervisor, stop: StopRequest, args: argparse.Namespace, mission: str, out: Path
 ) -> Child:
-    hub = sup.start("can_hub", [sys.executable, "-m", "ftcap_hil", "can-hub", "--port", "0"])
+    _, channel = start_can_hub(sup.start, timeout_s=HUB_TIMEOUT_S, check=stop.check)
     ports = Ports.pick()
-    ports = Ports(ports.gcs, ports.allocator, ports.vessel, ports.zenoh, wait_for_hub(hub, stop))
+    hub_port = int(channel.rsplit(":", 1)[1])
+    ports = Ports(ports.gcs, ports.allocator, ports.vessel, ports.zenoh, hub_port)
     log.info("ports on %s: %s", LOCALHOST, ports)
     sup.start("allocator", allocator_argv(ports))  # the Zenoh router: before its client
     stop.check()
@@ -391,7 +271,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as e:
         raise ConfigError(str(e)) from e
     (out / "logs").mkdir(parents=True, exist_ok=True)
-    sup = Supervisor(out / "logs")
+    # Ctrl-C reaches the demo only (new sessions): it stops the children
+    sup = Supervisor(out / "logs", pids_file="pids.json", grace_s=STOP_GRACE_S, new_session=True)
     loop = DeadlineLoop(SUPERVISE_PERIOD_NS)
     started = time.monotonic()
     with capture_signals(loop.request_exit, on_force=sup.hurry) as signals:

@@ -14,9 +14,10 @@ import logging
 from pathlib import Path
 
 from ftcap_hil.apps.options import add_set_option
+from ftcap_hil.apps.vessel_ports import VesselPorts
 from ftcap_hil.config.sim import load_config
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.runtime.vessel_process import Recorder, VesselPorts, VesselProcess
+from ftcap_hil.runtime.vessel_process import Recorder, VesselProcess
 
 log = logging.getLogger(__name__)
 

@@ -37,6 +37,7 @@ from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.ports.transitions import TransitionLog, log_to
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.esc_watchdog import EscStallMonitor, EscWatchdog
 from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
@@ -51,7 +52,6 @@ from ftcap_hil.runtime.status_report import (
     announce_cycle,
     assemble_status,
 )
-from ftcap_hil.runtime.transitions import TransitionLog, log_to
 
 log = logging.getLogger(__name__)
 _log_announce = log_to(log)

@@ -10,7 +10,7 @@ Each ESC's status age (seconds since its last ``esc.Status``, +inf if never hear
   failure only once another ESC has been reporting for ``timeout_s`` (the *others-up* rule:
   the bus and the vessel are alive, this ESC is not).
 
-Announcements go through a :class:`~ftcap_hil.runtime.transitions.TransitionLog`, so each is
+Announcements go through a :class:`~ftcap_hil.ports.transitions.TransitionLog`, so each is
 made once when it starts and once when it ends.
 """
 
@@ -22,7 +22,7 @@ import numpy as np
 
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.status import Severity
-from ftcap_hil.runtime.transitions import TransitionLog
+from ftcap_hil.ports.transitions import TransitionLog
 
 
 class EscWatchdog:

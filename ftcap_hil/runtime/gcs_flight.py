@@ -27,12 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from bridges.mavlink.gcs import MavlinkGcsLink, StatusText
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.controllers import limit_wrench
 from ftcap_hil.core.models.plants import wrap_angle
-from ftcap_hil.core.status import AllocatorStatus
+from ftcap_hil.core.status import AllocatorStatus, Severity
+from ftcap_hil.ports.ground_link import GroundLink, StatusText
 from ftcap_hil.ports.mailbox import Stamped
+from ftcap_hil.ports.transitions import LOG_LEVEL, TransitionLog
 from ftcap_hil.report.flight import FlightRecorder
 from ftcap_hil.runtime.gcs_parts import (
     FlightPlan,
@@ -61,7 +62,7 @@ class Flight:
 
     def __init__(
         self,
-        link: MavlinkGcsLink,
+        link: GroundLink,
         plan: FlightPlan,
         t0_ns: int | None = None,
         *,
@@ -81,7 +82,7 @@ class Flight:
         self.error: BaseException | None = None  # what ended a background flight
         self._due = deque(plan.injections)
         self._injector: Injector | None = None
-        self._flags: dict[str, bool] = {}
+        self._transitions = TransitionLog(self._announce)
         self._thread: threading.Thread | None = None
 
     @property
@@ -215,10 +216,12 @@ class Flight:
         log.log(level, msg, *args)
 
     def _transition(self, name: str, on: bool, text: str) -> None:
-        """Log a condition when it starts and when it ends, not every cycle."""
-        if on != self._flags.get(name, False):
-            self._flags[name] = on
-            self._say(logging.WARNING if on else logging.INFO, "%s%s", "" if on else "over: ", text)
+        """Log a condition when it starts (a warning) and when it ends ("over: ", info), not
+        every cycle."""
+        self._transitions.update(name, on, text, f"over: {text}")
+
+    def _announce(self, text: str, severity: Severity) -> None:
+        self._say(LOG_LEVEL[severity], "%s", text)
 
     def drain(self) -> None:
         """Injection outcomes and (``drain_texts``) STATUSTEXTs received so far: kept, logged."""

@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 
-from bridges.mavlink.gcs import MavlinkGcsLink
 from ftcap_hil.core.errors import ExitCode, FtcapError
 from ftcap_hil.core.faults import Injection
 from ftcap_hil.core.messages import FloatArray, Odometry
 from ftcap_hil.core.models.controllers import PoseController
+from ftcap_hil.ports.ground_link import GroundLink
 
 Controller = Callable[[FloatArray, FloatArray], FloatArray]
 Reference = Callable[[float], FloatArray]
@@ -132,7 +132,7 @@ class FlightPlan:
 @dataclass(frozen=True)
 class InjectionOutcome:
     """One injection as sent: mission time and wall clock of the send, the ACK's result
-    (a MavResult name, or ``"NO_ACK"``)."""
+    (the reply's name, ``"ACCEPTED"`` when carried out, or ``"NO_ACK"``)."""
 
     injection: Injection
     sent_at_s: float
@@ -155,7 +155,7 @@ class InjectionOutcome:
 class Injector:
     """Sends injections in order on its own thread; :meth:`outcomes` drains the results."""
 
-    def __init__(self, link: MavlinkGcsLink, t0_ns: int, timeout_s: float, attempts: int) -> None:
+    def __init__(self, link: GroundLink, t0_ns: int, timeout_s: float, attempts: int) -> None:
         self._link, self._t0_ns = link, t0_ns
         self._timeout_s, self._attempts = timeout_s, attempts
         self._todo: queue.Queue[Injection | None] = queue.Queue()

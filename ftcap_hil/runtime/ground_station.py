@@ -1,7 +1,7 @@
 """The ground-station driver: ``ftcap-hil gcs``, the end-to-end tests and the vcan tests.
 
-A :class:`GroundStation` drives one open :class:`~bridges.mavlink.gcs.MavlinkGcsLink` (the
-caller opens and closes it):
+A :class:`GroundStation` drives one open :class:`~ftcap_hil.ports.ground_link.GroundLink`
+(the caller opens and closes it; ``bridges.mavlink.gcs.MavlinkGcsLink`` is one):
 
 * :meth:`GroundStation.connect`: the HEARTBEATs of the vessel and the allocator, the
   allocator past MAV_STATE_BOOT (its control loop runs), the vessel's SYS_FAILURE_EN = 1 (if
@@ -33,12 +33,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
-from bridges.mavlink.allocator_params import CODE_OF_MODE, MODE_CODES
-from bridges.mavlink.gcs import MavlinkGcsLink
-from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavResult
 from ftcap_hil.config.mission import Mission
 from ftcap_hil.core.messages import FaultKind
 from ftcap_hil.core.status import Mode
+from ftcap_hil.ports.ground_link import GroundLink, ParamWrite, Reply
 from ftcap_hil.report.flight import FlightRecorder
 from ftcap_hil.runtime.gcs_flight import Flight, log
 from ftcap_hil.runtime.gcs_parts import (
@@ -107,7 +105,7 @@ class GroundStation:
     process died). :meth:`request_exit` is safe from a signal handler or another thread.
     """
 
-    link: MavlinkGcsLink
+    link: GroundLink
     check: Callable[[], None] | None = None
     current: Flight | None = None
     _stop: threading.Event = field(default_factory=threading.Event, repr=False)
@@ -141,16 +139,17 @@ class GroundStation:
             time.sleep(0.01)
         return 0 if first is None else first.stamp_ns
 
-    def _set(
-        self, ids: tuple[int, int], who: str, name: str, value: int, timeout_s: float
-    ) -> float:
+    def _confirm(self, who: str, ids: tuple[int, int], write: Callable[[], ParamWrite]) -> float:
+        """``write()`` a parameter of the ``who`` at ``ids``; the value it reports back."""
         self._abort_if_asked()
-        got = self.link.set_param(ids, name, value, timeout_s=timeout_s)
-        if got is None:
-            raise NoAnswer(f"the {who} {ids} did not answer PARAM_SET {name} = {value}")
-        if got != value:
-            raise Refused(f"the {who} {ids} refused {name} = {value} (it reports {got:g})")
-        return got
+        got = write()
+        if got.reported is None:
+            raise NoAnswer(f"the {who} {ids} did not answer PARAM_SET {got.name} = {got.value}")
+        if got.reported != got.value:
+            raise Refused(
+                f"the {who} {ids} refused {got.name} = {got.value} (it reports {got.reported:g})"
+            )
+        return got.reported
 
     def connect(
         self,
@@ -179,10 +178,16 @@ class GroundStation:
         ready_ns = time.monotonic_ns()
         enabled = None
         if enable_failures:
-            enabled = self._set(link.vessel_ids, "vessel", FAILURE_ENABLE_PARAM, 1, param_timeout_s)
+            enabled = self._confirm(
+                "vessel",
+                link.vessel_ids,
+                lambda: link.allow_fault_injection(timeout_s=param_timeout_s),
+            )
         if mode is not None:
-            self._set(
-                link.allocator_ids, "allocator", "FTC_MODE", CODE_OF_MODE[mode], param_timeout_s
+            self._confirm(
+                "allocator",
+                link.allocator_ids,
+                lambda: link.request_mode(mode, timeout_s=param_timeout_s),
             )
         mode_name = self._read_mode(min(timeout_s, 5.0)) if read_mode else None
         t0_ns = self._wait(self._first_odometry, timeout_s)
@@ -192,10 +197,10 @@ class GroundStation:
 
     def _read_mode(self, timeout_s: float) -> str:
         self._abort_if_asked()
-        params = self.link.fetch_params(self.link.allocator_ids, timeout_s=timeout_s)
-        if "FTC_MODE" not in params:
+        mode = self.link.read_mode(timeout_s=timeout_s)
+        if mode is None:
             raise NoAnswer("the allocator did not report FTC_MODE (parameter protocol)")
-        return MODE_CODES[int(params["FTC_MODE"])].value
+        return mode.value
 
     def flight(
         self,
@@ -213,7 +218,7 @@ class GroundStation:
             self.current.request_exit()
         return self.current
 
-    def wind_down(self, clear_faults: bool) -> MavResult | None:
+    def wind_down(self, clear_faults: bool) -> Reply | None:
         """Zero wrench; with ``clear_faults``, MAV_CMD_INJECT_FAILURE OK on every thruster
         (its COMMAND_ACK result, None if none came)."""
         self.link.send_wrench([0.0, 0.0, 0.0])

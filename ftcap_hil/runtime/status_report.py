@@ -21,7 +21,7 @@ from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CycleResult
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray
 from ftcap_hil.core.status import AllocatorStatus, Mode
-from ftcap_hil.runtime.transitions import TransitionLog
+from ftcap_hil.ports.transitions import TransitionLog
 
 
 @dataclass(frozen=True)

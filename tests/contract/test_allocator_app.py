@@ -28,14 +28,14 @@ import pytest
 from bridges.can_io.adapters import CanEscStatusSink
 from bridges.can_io.codec import CanFrame, DataType, RawCommandMsg, TransferAssembler
 from bridges.mavlink.config import ALLOCATOR_IDS, GCS_IDS, MavlinkEndpoint
-from bridges.mavlink.gcs import MavlinkGcsLink, wait_until
+from bridges.mavlink.gcs import MavlinkGcsLink
 from ftcap_hil.apps.allocator import wire
-from ftcap_hil.apps.demo import free_ports
 from ftcap_hil.config.daemon import load_daemon_config
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.messages import EscStatus
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.daemon import AllocatorDaemon
+from ftcap_hil.runtime.processes import free_ports, wait_until
 
 pytestmark = pytest.mark.timeout(60)
 

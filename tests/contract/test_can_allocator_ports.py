@@ -24,12 +24,12 @@ from bridges.can_io.codec import (
     TransferAssembler,
 )
 from bridges.can_io.hub import CanHub
-from bridges.mavlink.gcs import wait_until
+from ftcap_hil.apps.allocator_ports import build_ports
 from ftcap_hil.config.daemon import LoadedConfig, load_daemon_config
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.status import AllocatorStatus
-from ftcap_hil.runtime.allocator_ports import build_ports
 from ftcap_hil.runtime.daemon import Ports
+from ftcap_hil.runtime.processes import wait_until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -152,8 +152,8 @@ def test_the_vessel_decodes_with_its_own_physical_curve(
     """Same curve on both sides: the force arrives (within the int14 and table
     resolution); the deliberately wrong linear curve in the allocator: at half thrust the
     T200 gives 12.23 / 18.2 = 0.67 of the force asked for."""
+    from ftcap_hil.apps.vessel_ports import VesselPorts
     from ftcap_hil.config.sim import load_config
-    from ftcap_hil.runtime.vessel_process import VesselPorts
 
     scale = "can.curve_thrust_max_n=0.1"
     vessel_cfg = load_config(

@@ -11,11 +11,8 @@ from __future__ import annotations
 
 import json
 import math
-import queue
 import select
-import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -46,8 +43,8 @@ from bridges.can_io.codec import (
 from bridges.can_io.force_map import ForceRawMap, NonFiniteCommand
 from bridges.can_io.hub import CanHub
 from bridges.can_io.ports import receipt_ns
-from bridges.mavlink.gcs import wait_until
 from ftcap_hil.core.messages import EscStatus
+from ftcap_hil.runtime.processes import Child, wait_until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -93,33 +90,24 @@ def bus_factory(hub: CanHub) -> Iterator[Callable[[], can.BusABC]]:
         bus.shutdown()
 
 
-class VesselProcess:
-    """The child process playing the ESCs; lines it prints are queued as dicts."""
+class VesselProcess(Child):
+    """The child process playing the ESCs; the lines it prints are read as dicts."""
 
     def __init__(self, channel: str, u_max: list[float]) -> None:
         args = [sys.executable, __file__, channel, *map(str, u_max)]
-        self.proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-        self.lines: queue.Queue[dict[str, Any]] = queue.Queue()
-        threading.Thread(target=self._read, daemon=True).start()
+        super().__init__("esc-vessel", args, stderr="inherit", stdin_pipe=True)
         assert self.next(20.0) == {"ready": True}
 
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            self.lines.put(json.loads(line))
-
     def next(self, timeout_s: float = 10.0) -> dict[str, Any]:
-        return self.lines.get(timeout=timeout_s)
+        line = self.next_line(timeout_s)
+        assert line is not None, f"no line from the ESC process within {timeout_s:g} s"
+        got: dict[str, Any] = json.loads(line)
+        return got
 
     def next_command(self, timeout_s: float = 10.0) -> dict[str, Any]:
         while "u" not in (line := self.next(timeout_s)):
             pass
         return line
-
-    def stop(self) -> int:
-        assert self.proc.stdin is not None
-        self.proc.stdin.close()  # EOF tells the child to shut down
-        return self.proc.wait(10.0)
 
 
 @pytest.mark.parametrize("m", [4, 6, 8])
@@ -154,7 +142,9 @@ def test_command_round_trip_and_esc_telemetry_across_processes(
         assert {"allocator_mode": "OFFLINE"} in last
         assert [line["raw"] for line in last if "raw" in line] == [[0] * m]
     finally:
-        assert vessel.stop() == 0
+        code = vessel.stop(None)  # EOF on its stdin tells it to shut down
+        vessel.close()
+        assert code == 0
 
     frames = _capture(capture)
     commands = [f for f in frames if (f.can_id >> 8) & 0xFFFF == DataType.RAW_COMMAND]

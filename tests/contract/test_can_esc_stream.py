@@ -11,7 +11,6 @@ holds on a loaded 2-core machine; the 1.5-period target is measured by
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 import textwrap
 import time
@@ -26,6 +25,7 @@ from bridges.can_io.codec import CanFrame, RawCommandMsg, TransferAssembler
 from bridges.can_io.esc_stream import EscCommandStream
 from bridges.can_io.force_map import ForceRawMap
 from bridges.can_io.hub import CanHub
+from ftcap_hil.runtime.processes import Child
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -51,19 +51,20 @@ def hub() -> Iterator[CanHub]:
         yield h
 
 
-def _start_capture(hub: CanHub, seconds: float) -> subprocess.Popen[str]:
-    proc = subprocess.Popen(
-        [sys.executable, "-c", CAPTURE, hub.channel, str(seconds)],
-        stdout=subprocess.PIPE,
-        text=True,
+def _start_capture(hub: CanHub, seconds: float) -> Child:
+    proc = Child(
+        "capture", [sys.executable, "-c", CAPTURE, hub.channel, str(seconds)], stderr="inherit"
     )
-    assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    assert proc.next_line(30.0) == "ready"
     return proc
 
 
-def _commands(proc: subprocess.Popen[str]) -> list[tuple[float, tuple[int, ...]]]:
+def _commands(proc: Child) -> list[tuple[float, tuple[int, ...]]]:
     """(receive stamp of the last frame, raw values) of every RawCommand captured."""
-    out, _ = proc.communicate(timeout=60)
+    with proc:
+        assert proc.wait(60) == 0
+        out = proc.next_line(10.0)
+    assert out is not None
     asm = TransferAssembler()
     got = []
     for stamp, can_id, data in json.loads(out):

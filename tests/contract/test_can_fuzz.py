@@ -42,9 +42,9 @@ from bridges.can_io.codec import (
 )
 from bridges.can_io.force_map import RAW_MAX, ForceRawMap, NonFiniteCommand
 from bridges.can_io.hub import CanHub
-from bridges.mavlink.gcs import wait_until
 from ftcap_hil.core.messages import EscStatus, ThrusterCommand
 from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.runtime.processes import wait_until
 from tests.support.payloads import can_frames
 
 pytestmark = pytest.mark.timeout(300)

@@ -7,10 +7,8 @@ Clients are real ``can.Bus`` objects (interface ``canhub``), the hub runs in-pro
 from __future__ import annotations
 
 import os
-import select
 import signal
 import socket
-import subprocess
 import sys
 import textwrap
 import threading
@@ -24,6 +22,7 @@ from bridges.can_io.bus import CanBusError, open_can_bus
 from bridges.can_io.hub import BANNER, CanHub, parse_channel
 from bridges.can_io.hub_bus import CanHubBus
 from bridges.can_io.reconnect import ReconnectingBus
+from ftcap_hil.runtime.processes import Child, start_can_hub
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -214,18 +213,10 @@ def test_open_can_bus_choices(hub: CanHub) -> None:
         assert isinstance(bus, ReconnectingBus) and isinstance(bus.inner, CanHubBus)
 
 
-def _start_hub_process() -> tuple[subprocess.Popen[str], str]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "ftcap_hil", "can-hub", "--port", "0"],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stdout is not None
-    ready, _, _ = select.select([proc.stdout], [], [], 20.0)
-    assert ready, "hub process did not report ready"
-    line = proc.stdout.readline()
-    assert line.startswith("can_hub listening on 127.0.0.1:"), line
-    return proc, line.rsplit(" ", 1)[1].strip()
+def _start_hub_process() -> tuple[Child, str]:
+    proc, channel = start_can_hub(timeout_s=20.0)
+    assert channel.startswith("127.0.0.1:"), channel
+    return proc, channel
 
 
 PEER = textwrap.dedent(
@@ -242,23 +233,16 @@ PEER = textwrap.dedent(
 
 def test_hub_process_with_client_in_another_process() -> None:
     proc, channel = _start_hub_process()
-    peer = None
-    try:
-        peer = subprocess.Popen(
-            [sys.executable, "-c", PEER, channel, "3"], stdout=subprocess.PIPE, text=True
-        )
+    with proc, Child("peer", [sys.executable, "-c", PEER, channel, "3"], stderr="inherit") as peer:
         with CanHubBus(channel) as bus:
-            assert peer.stdout is not None and peer.stdout.readline().strip() == "joined"
+            assert peer.next_line(10.0) == "joined"
             for i in range(3):
                 bus.send(can.Message(arbitration_id=100 + i, data=bytes([i, 1, 2])))
                 echo = bus.recv(10.0)
                 assert echo is not None
                 assert (echo.arbitration_id, bytes(echo.data)) == (101 + i, bytes([2, 1, i]))
             assert peer.wait(10.0) == 0
-    finally:
-        if peer is not None and peer.poll() is None:
-            peer.kill()
-        proc.send_signal(signal.SIGTERM)
+        proc.send(signal.SIGTERM)
         assert proc.wait(10.0) == 0
     # No leftover process: the hub's pid is gone and its port is closed.
     with pytest.raises(ProcessLookupError):
@@ -269,11 +253,10 @@ def test_hub_process_with_client_in_another_process() -> None:
 
 def test_hub_process_banner_on_raw_socket() -> None:
     proc, channel = _start_hub_process()
-    try:
+    with proc:
         with socket.create_connection(parse_channel(channel), timeout=5.0) as s:
             assert s.recv(len(BANNER)) == BANNER
-    finally:
-        proc.send_signal(signal.SIGINT)
+        proc.send(signal.SIGINT)
         assert proc.wait(10.0) == 0
 
 

@@ -17,14 +17,9 @@ from bridges.can_io.bus import open_can_bus
 from bridges.can_io.force_map import ForceRawMap
 from bridges.can_io.hub import CanHub
 from bridges.can_io.reconnect import ReconnectingBus
-from bridges.mavlink.gcs import wait_until
-from ftcap_hil.apps.demo import free_ports
+from ftcap_hil.runtime.processes import free_port, wait_until
 
 pytestmark = pytest.mark.timeout(120)
-
-
-def _free_port() -> int:
-    return free_ports(socket.SOCK_STREAM, 1)[0]
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float) -> bool:
@@ -32,7 +27,7 @@ def _wait_for(cond: Callable[[], bool], timeout_s: float) -> bool:
 
 
 def test_commands_flow_again_after_a_hub_restart() -> None:
-    port = _free_port()
+    port = free_port(socket.SOCK_STREAM)
     channel = f"127.0.0.1:{port}"
     fmap = ForceRawMap.create([10.0, 10.0])
     hub = CanHub(port=port).start()
@@ -81,13 +76,13 @@ def test_commands_flow_again_after_a_hub_restart() -> None:
 
 
 def test_a_bus_that_cannot_be_opened_fails_at_start() -> None:
-    port = _free_port()
+    port = free_port(socket.SOCK_STREAM)
     with pytest.raises(Exception, match="cannot open CAN bus"):
         open_can_bus("canhub", f"127.0.0.1:{port}")
 
 
 def test_send_while_down_raises_and_shutdown_stops_retrying() -> None:
-    port = _free_port()
+    port = free_port(socket.SOCK_STREAM)
     hub = CanHub(port=port).start()
     bus = open_can_bus("canhub", f"127.0.0.1:{port}", retry_period_s=0.05)
     assert isinstance(bus, ReconnectingBus)

@@ -10,8 +10,6 @@ bounded; the ground station's parameter pings are answered (>= 99 %) through a f
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 
@@ -21,7 +19,7 @@ from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.config import ALLOCATOR_IDS, MavlinkEndpoint
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.peers import TrafficLimits
-from tests.support.mavlink_abuse import Pinger, flood, rss_bytes, udp_drops
+from tests.support.mavlink_abuse import Pinger, flood, flooded, rss_bytes, start_flood, udp_drops
 from tests.support.mavlink_peers import (
     RawPeer,
     free_udp_ports,
@@ -49,19 +47,6 @@ def rig() -> Iterator[tuple[MavlinkAllocatorLink, RawPeer, int]]:
             yield link, gcs, link_port
 
 
-def _flood_process(
-    port: int, rate: float, seconds: float, kind: str, *extra: str
-) -> subprocess.Popen[str]:
-    cmd = [sys.executable, "-m", "tests.support.mavlink_abuse", str(port), str(rate)]
-    return subprocess.Popen([*cmd, str(seconds), kind, *extra], stdout=subprocess.PIPE, text=True)
-
-
-def _sent(proc: subprocess.Popen[str]) -> int:
-    out, _ = proc.communicate(timeout=60)
-    assert proc.returncode == 0
-    return int(out.split()[-1])
-
-
 def _assert_accounted(link: MavlinkAllocatorLink, port: int, sent: int, kernel0: int) -> None:
     """``sent`` counts every datagram sent to the link (flood and pings)."""
     st, table = link.stats, link._port.table.stats  # noqa: SLF001
@@ -74,9 +59,9 @@ def _assert_accounted(link: MavlinkAllocatorLink, port: int, sent: int, kernel0:
 def test_ten_thousand_new_ports_of_fuzz_crash_nothing_and_are_all_counted(rig) -> None:
     link, gcs, port = rig
     rss0, kernel0 = rss_bytes(), udp_drops(port)
-    fuzzer = _flood_process(port, 2000, 5.0, "fuzz", "--new-ports")  # 10**4 source ports
+    fuzzer = start_flood(port, 2000, 5.0, "fuzz", "--new-ports")  # 10**4 source ports
     with Pinger(gcs) as pings:
-        sent = _sent(fuzzer)
+        sent = flooded(fuzzer)
     assert sent == 10_000
     _assert_accounted(link, port, sent + pings.sent, kernel0)
     assert link.is_alive and link.stats.errors == 0
@@ -96,10 +81,10 @@ def test_a_ten_kilohertz_flood_from_one_source_leaves_the_pings_answered(rig, ki
     # case without a key (it is trusted and parsed at the peer rate); "random": garbage.
     link, gcs, port = rig
     rss0, kernel0 = rss_bytes(), udp_drops(port)
-    flooder = _flood_process(port, 10_000, 4.0, kind)
+    flooder = start_flood(port, 10_000, 4.0, kind)
     time.sleep(0.3)
     with Pinger(gcs) as pings:
-        sent = _sent(flooder)
+        sent = flooded(flooder)
     _assert_accounted(link, port, sent + pings.sent, kernel0)
     answered = pings.answered()
     assert answered >= 0.99 * pings.sent, (answered, pings.sent, link.stats)

@@ -354,7 +354,8 @@ def test_esc_status_reaches_the_ground_station() -> None:
 
     from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
     from bridges.mavlink.config import MavlinkEndpoint
-    from bridges.mavlink.gcs import MavlinkGcsLink, wait_until
+    from bridges.mavlink.gcs import MavlinkGcsLink
+    from ftcap_hil.runtime.processes import wait_until
 
     def free() -> int:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:

@@ -15,12 +15,8 @@ misc --no-state`` and commands on stdin. Skipped when MAVProxy is not installed.
 from __future__ import annotations
 
 import math
-import os
-import queue
 import re
-import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -32,6 +28,7 @@ from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
 from ftcap_hil.core.messages import FaultInjection, FaultKind
+from ftcap_hil.runtime.processes import Child
 from tests.support.mavlink_peers import free_udp_ports, wait_until
 
 MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
@@ -42,45 +39,31 @@ pytestmark = [
 ]
 
 
-class MavproxySession:
-    """MAVProxy as a child process, driven through stdin, its stdout read by one thread."""
+class MavproxySession(Child):
+    """MAVProxy as a child process, driven through stdin, its output read line by line;
+    :meth:`close` ends it with EOF on its stdin (its clean exit), SIGKILL if that fails."""
 
     def __init__(
         self, master: str, target: tuple[int, int], cwd: Path, modules: str = "param,cmdlong,misc"
     ) -> None:
-        env = {**os.environ, "HOME": str(cwd), "PYTHONUNBUFFERED": "1"}
-        self.proc = subprocess.Popen(
+        super().__init__(
+            "mavproxy",
             [
                 sys.executable, str(MAVPROXY), f"--master={master}",
                 f"--default-modules={modules}", "--no-state", "--mav20",
                 f"--target-system={target[0]}", f"--target-component={target[1]}",
             ],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-            text=True, cwd=cwd, env=env,
+            stdin_pipe=True, cwd=cwd, env={"HOME": str(cwd)},
         )  # fmt: skip
-        self.lines: queue.Queue[str] = queue.Queue()
         self.transcript: list[str] = []
-        self._reader = threading.Thread(target=self._read, name="mavproxy-stdout", daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            self.lines.put(line.rstrip())
 
     def command(self, line: str) -> None:
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(line + "\n")
-        self.proc.stdin.flush()
+        self.write(line)
 
     def expect(self, pattern: str, timeout_s: float = 10.0) -> str:
         regex = re.compile(pattern)
         deadline = time.monotonic() + timeout_s
-        while (left := deadline - time.monotonic()) > 0:
-            try:
-                line = self.lines.get(timeout=left)
-            except queue.Empty:
-                break
+        while (line := self.next_line(deadline - time.monotonic())) is not None:
             self.transcript.append(line)
             if regex.search(line):
                 return line
@@ -89,15 +72,8 @@ class MavproxySession:
         )
 
     def close(self) -> None:
-        if self.proc.poll() is None:
-            assert self.proc.stdin is not None
-            self.proc.stdin.close()  # EOF on stdin is MAVProxy's clean exit
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        self._reader.join(5)
+        self.stop(None, 10.0)
+        super().close()
 
 
 @pytest.fixture

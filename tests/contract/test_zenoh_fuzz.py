@@ -23,12 +23,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridges.mavlink.gcs import wait_until
 from bridges.zenoh_io.codec import ZenohKeys, encode_wrench_setpoint
 from bridges.zenoh_io.link import ZenohAllocatorLink, ZenohVesselLink, make_config
-from ftcap_hil.apps.demo import free_ports
 from ftcap_hil.core.messages import WrenchSetpoint
 from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.runtime.processes import free_port, wait_until
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -82,10 +81,6 @@ def _rss_mb() -> float:
     raise AssertionError("no VmRSS")
 
 
-def _free_port() -> int:
-    return free_ports(socket.SOCK_STREAM, 1)[0]
-
-
 def _wait_for(cond: Callable[[], bool], timeout_s: float) -> bool:
     return wait_until(cond, timeout_s, 0.05)
 
@@ -101,7 +96,7 @@ def _flood(port: int, plan: dict[str, tuple[dict[str, object], int]]) -> None:
 
 
 def test_zenoh_fuzz_is_counted_bounded_and_harmless(caplog: pytest.LogCaptureFixture) -> None:
-    port = _free_port()
+    port = free_port(socket.SOCK_STREAM)
     keys = ZenohKeys.for_vessel(VESSEL)
     plan = {
         keys.setpoint_wrench: ({"v": 1, "X_N": 10.0, "Y_N": -5.0, "N_Nm": 1.0}, N_TOTAL * 2 // 5),

@@ -9,11 +9,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import queue
 import socket
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -38,6 +36,7 @@ from ftcap_hil.core.messages import (
     WrenchSetpoint,
 )
 from ftcap_hil.core.status import AllocatorStatus, Mode
+from ftcap_hil.runtime.processes import Child
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -120,38 +119,22 @@ def gcs(allocator: ZenohAllocatorLink, port: int) -> Iterator[ZenohGcsLink]:
         yield link
 
 
-class VesselProcess:
-    def __init__(self, port: int) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-c", VESSEL_PROCESS, VESSEL, str(port)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        self.events: queue.Queue[dict[str, Any]] = queue.Queue()
-        threading.Thread(target=self._read, daemon=True).start()
+class VesselProcess(Child):
+    """The child process playing the vessel; the lines it prints are events (dicts);
+    ``stop(None)`` (EOF on its stdin) asks it to exit."""
 
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            self.events.put(json.loads(line))
+    def __init__(self, port: int) -> None:
+        argv = [sys.executable, "-c", VESSEL_PROCESS, VESSEL, str(port)]
+        super().__init__("zenoh-vessel", argv, stderr="inherit", stdin_pipe=True)
 
     def next_event(self, name: str, timeout_s: float = TIMEOUT_S) -> dict[str, Any]:
         deadline = time.monotonic() + timeout_s
         while True:
-            event = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
+            line = self.next_line(max(0.0, deadline - time.monotonic()))
+            assert line is not None, f"no {name!r} event within {timeout_s:g} s"
+            event: dict[str, Any] = json.loads(line)
             if event["event"] == name:
                 return event
-
-    def stop(self) -> int:
-        assert self.proc.stdin is not None
-        if not self.proc.stdin.closed:
-            self.proc.stdin.close()
-        try:
-            return self.proc.wait(timeout=TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            return self.proc.wait()
 
 
 @pytest.fixture
@@ -161,7 +144,8 @@ def vessel_process(allocator: ZenohAllocatorLink, port: int) -> Iterator[VesselP
         assert vessel.next_event("ready", timeout_s=30.0)["matched"] is True
         yield vessel
     finally:
-        vessel.stop()
+        vessel.stop(None, TIMEOUT_S)
+        vessel.close()
 
 
 def test_setpoint_reaches_allocator_mailbox(
@@ -197,9 +181,7 @@ def test_fault_injection_reaches_vessel_process(
 ) -> None:
     assert gcs.subscribers_matched(gcs.keys.fault_inject, TIMEOUT_S)
     first = FaultInjection(2, FaultKind.WEAK, 0.25)
-    assert wait_until(
-        lambda: not vessel_process.events.empty(), retry=lambda: gcs.inject_fault(first)
-    )
+    assert wait_until(lambda: vessel_process.unread() > 0, retry=lambda: gcs.inject_fault(first))
     event = vessel_process.next_event("fault")
     assert (event["index"], event["kind"], event["value"]) == (2, "weak", 0.25)
     # a thruster the vessel does not have (n_thrusters=4) is dropped and counted, in order
@@ -208,7 +190,7 @@ def test_fault_injection_reaches_vessel_process(
     while (event := vessel_process.next_event("fault"))["kind"] == "weak":
         pass  # repeats of the first injection
     assert (event["index"], event["kind"], event["value"]) == (1, "bias", -15.0)
-    assert vessel_process.stop() == 0
+    assert vessel_process.stop(None, TIMEOUT_S) == 0
     assert vessel_process.next_event("bye")["malformed"] == 1
 
 

@@ -24,7 +24,6 @@ import numpy as np
 import pytest
 import zenoh
 
-from bridges.mavlink.gcs import wait_until
 from bridges.zenoh_io.codec import ZenohKeys, encode_wrench_setpoint
 from bridges.zenoh_io.config import shipped_config_path
 from bridges.zenoh_io.link import (
@@ -37,6 +36,7 @@ from bridges.zenoh_io.link import (
 )
 from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry, WrenchSetpoint
 from ftcap_hil.core.status import AllocatorStatus
+from ftcap_hil.runtime.processes import wait_until
 
 pytestmark = [
     pytest.mark.timeout(180),

@@ -7,13 +7,11 @@ import json
 import os
 import signal
 import socket
-import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from bridges.mavlink.gcs import wait_until
-from ftcap_hil.apps.demo import free_ports
+from ftcap_hil.runtime.processes import Child, free_ports, wait_until
 
 OUR_PROCESSES = ("ftcap_hil", "ftcap-hil")
 
@@ -48,15 +46,23 @@ def wait_for(predicate: Callable[[], bool], timeout_s: float, poll_s: float = 0.
     return wait_until(predicate, timeout_s, poll_s)
 
 
-def reap(proc: subprocess.Popen[bytes], out: Path) -> None:
-    """Teardown: stop the demo (it stops its children), then SIGKILL any child left, by PID."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+def start(name: str, argv: list[str], out: Path) -> Child:
+    """``argv`` with its stdout in ``out``/NAME.stdout and its stderr in NAME.stderr."""
+    out.mkdir(parents=True, exist_ok=True)
+    return Child(name, argv, out / f"{name}.stdout", stderr=out / f"{name}.stderr")
+
+
+def stderr_of(proc: Child) -> str:
+    """What ``proc`` (started by :func:`start`) wrote to its stderr so far."""
+    assert proc.log_path is not None
+    return proc.log_path.with_suffix(".stderr").read_text(errors="replace")
+
+
+def reap(proc: Child, out: Path) -> None:
+    """Teardown: stop the demo (SIGTERM: it stops its children, 30 s), then SIGKILL any child
+    left, by PID."""
+    proc.stop(signal.SIGTERM, 30.0)
+    proc.close()
     for pid in child_pids(out).values():
         if is_ours_and_alive(pid):
             with contextlib.suppress(ProcessLookupError):

@@ -11,19 +11,14 @@ Topology of one rig (every port chosen free per test, loopback only, no multicas
     CAN:   `ftcap-hil can-hub --port 0`; allocator (node 10), sim (ESC nodes 20..23)
            and the test's tap are its clients
 
-Every process is started through a :class:`Rig` and killed by PID at its teardown.
+Every process is started through a :class:`Rig` (its
+:class:`~ftcap_hil.runtime.processes.Supervisor`) and killed by PID at its teardown.
 """
 
 from __future__ import annotations
 
-import contextlib
 import csv
-import os
-import re
-import signal
 import socket
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -37,12 +32,18 @@ from bridges.can_io.adapters import CanEscStatusSource
 from bridges.can_io.codec import CanFrame, DataType, RawCommandMsg, TransferAssembler
 from bridges.can_io.hub_bus import CanHubBus
 from bridges.mavlink.config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink.gcs import MavlinkGcsLink, wait_until
+from bridges.mavlink.gcs import MavlinkGcsLink
 from bridges.zenoh_io.link import ZenohGcsLink, make_config
-from ftcap_hil.apps.demo import free_ports
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import Odometry
 from ftcap_hil.runtime.ground_station import Flight, FlightPlan, GroundStation, WrenchLaw, state_of
+from ftcap_hil.runtime.processes import (
+    Child,
+    Supervisor,
+    free_port,
+    ftcap_argv,
+    start_can_hub,
+)
 
 ALLOCATOR_NODE = 10
 ESC_IDS = (20, 21, 22, 23)
@@ -54,55 +55,6 @@ U_LIMIT_N = 0.1  # thruster amplitude limit of the shipped vessel files: raw RAW
 def record_raw(row: dict[str, str]) -> tuple[int, ...]:
     """The command in a sim ``--record`` row, in esc.RawCommand counts (as on the bus)."""
     return tuple(round(float(row[f"u_T{i}_N"]) * RAW_MAX / U_LIMIT_N) for i in range(1, 5))
-
-
-def free_port(kind: int) -> int:
-    return free_ports(kind, 1)[0]
-
-
-class Proc:
-    """One child process with its output in a log file; signalled and killed by PID."""
-
-    def __init__(self, name: str, cmd: list[str], log_path: Path, cwd: Path) -> None:
-        self.name = name
-        self.log_path = log_path
-        self._fh = open(log_path, "w")  # noqa: SIM115 - closed in kill()
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        self.popen = subprocess.Popen(
-            cmd, stdout=self._fh, stderr=subprocess.STDOUT, cwd=cwd, env=env
-        )
-        self.pid = self.popen.pid
-
-    def log(self) -> str:
-        return self.log_path.read_text(errors="replace")
-
-    def running(self) -> bool:
-        return self.popen.poll() is None
-
-    def wait_log(self, pattern: str, timeout_s: float = START_TIMEOUT_S) -> bool:
-        """True once ``pattern`` (regex) is in the log; False on timeout or early exit."""
-        rx = re.compile(pattern)
-        wait_until(lambda: rx.search(self.log()) or not self.running(), timeout_s)
-        return rx.search(self.log()) is not None
-
-    def send(self, sig: int) -> None:
-        if self.running():
-            os.kill(self.pid, sig)
-
-    def wait(self, timeout_s: float) -> int | None:
-        try:
-            return self.popen.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            return None
-
-    def kill(self) -> None:
-        """SIGKILL by PID if still running, reap, close the log. Idempotent."""
-        if self.running():
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(self.pid, signal.SIGKILL)
-        with contextlib.suppress(subprocess.TimeoutExpired):
-            self.popen.wait(10.0)
-        self._fh.close()
 
 
 @dataclass
@@ -165,8 +117,16 @@ class Rig:
     vessel_port: int = field(default_factory=lambda: free_port(socket.SOCK_DGRAM))
     gcs_port: int = field(default_factory=lambda: free_port(socket.SOCK_DGRAM))
     zenoh_port: int = field(default_factory=lambda: free_port(socket.SOCK_STREAM))
-    procs: dict[str, Proc] = field(default_factory=dict)
     closers: list[Callable[[], None]] = field(default_factory=list)
+    supervisor: Supervisor = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.supervisor = Supervisor(self.tmp)
+
+    @property
+    def procs(self) -> dict[str, Child]:
+        """The rig's processes by name (a name started twice gets a suffix)."""
+        return self.supervisor.by_name()
 
     @property
     def record(self) -> Path:
@@ -176,20 +136,16 @@ class Rig:
     def command_log(self) -> Path:
         return self.tmp / "commands.csv"
 
-    def _spawn(self, name: str, args: list[str]) -> Proc:
-        key = name if name not in self.procs else f"{name}-{len(self.procs)}"  # kill every one
-        proc = Proc(key, [sys.executable, *args], self.tmp / f"{key}.log", self.tmp)
-        self.procs[key] = proc
-        return proc
+    def _spawn(self, name: str, args: list[str]) -> Child:
+        return self.supervisor.start(name, ftcap_argv(*args), cwd=self.tmp)
+
+    def _start(self, name: str, argv: list[str]) -> Child:
+        return self.supervisor.start(name, argv, cwd=self.tmp)
 
     def start_hub(self) -> None:
-        hub = self._spawn("hub", ["-m", "ftcap_hil", "can-hub", "--port", "0"])
-        assert hub.wait_log(r"can_hub listening on \S+:\d+"), hub.log()
-        m = re.search(r"can_hub listening on (\S+:\d+)", hub.log())
-        assert m is not None
-        self.hub_channel = m.group(1)
+        _, self.hub_channel = start_can_hub(self._start, name="hub", timeout_s=START_TIMEOUT_S)
 
-    def start_allocator(self, sets: Sequence[str] = (), verbose: bool = False) -> Proc:
+    def start_allocator(self, sets: Sequence[str] = (), verbose: bool = False) -> Child:
         """``ftcap-hil allocator`` on this rig's ports (+ overrides); waits until it runs."""
         base = [
             f'can.channel="{self.hub_channel}"',
@@ -197,15 +153,15 @@ class Rig:
             f'mavlink.peers=["127.0.0.1:{self.gcs_port}"]',
             f"zenoh.overrides=['listen/endpoints:[\"tcp/127.0.0.1:{self.zenoh_port}\"]']",
         ]
-        args = ["-m", "ftcap_hil", *(["-vv"] if verbose else []), "allocator"]
+        args = [*(["-vv"] if verbose else []), "allocator"]
         args += ["--command-log", str(self.command_log)]
         for s in [*base, *sets]:
             args += ["--set", s]
         proc = self._spawn("allocator", args)
-        assert proc.wait_log(r"allocator: .* Hz, \d+ thrusters"), proc.log()
+        assert proc.wait_for(r"allocator: .* Hz, \d+ thrusters", START_TIMEOUT_S), proc.output()
         return proc
 
-    def start_sim(self, sets: Sequence[str] = (), args: Sequence[str] = ()) -> Proc:
+    def start_sim(self, sets: Sequence[str] = (), args: Sequence[str] = ()) -> Child:
         """``ftcap-hil sim --record`` on this rig's ports (+ overrides); waits until it runs."""
         base = [
             f"can.channel={self.hub_channel}",
@@ -213,11 +169,11 @@ class Rig:
             f'mavlink.peers=["127.0.0.1:{self.alloc_port}", "127.0.0.1:{self.gcs_port}"]',
             f"zenoh.connect=tcp/127.0.0.1:{self.zenoh_port}",
         ]
-        cmd = ["-m", "ftcap_hil", "sim", "--record", str(self.record), *args]
+        cmd = ["sim", "--record", str(self.record), *args]
         for s in [*base, *sets]:
             cmd += ["--set", s]
         proc = self._spawn("sim", cmd)
-        assert proc.wait_log("simulated vessel running"), proc.log()
+        assert proc.wait_for("simulated vessel running", START_TIMEOUT_S), proc.output()
         return proc
 
     def gcs(self) -> MavlinkGcsLink:
@@ -252,7 +208,7 @@ class Rig:
 
     def logs(self, tail: int = 6000) -> str:
         return "\n".join(
-            f"===== {n} (pid {p.pid}) =====\n{p.log()[-tail:]}" for n, p in self.procs.items()
+            f"===== {n} (pid {p.pid}) =====\n{p.output()[-tail:]}" for n, p in self.procs.items()
         )
 
     def teardown(self) -> None:
@@ -262,8 +218,7 @@ class Rig:
                 close()
         finally:
             self.closers.clear()
-            for proc in reversed(list(self.procs.values())):
-                proc.kill()
+            self.supervisor.kill_all()
 
 
 def latest_odometry(gcs: MavlinkGcsLink) -> Odometry:

@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 
-from ftcap_hil.apps.demo import free_ports
+from ftcap_hil.runtime.processes import Child, Supervisor, free_ports
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(600)]
 
@@ -87,18 +87,14 @@ def _children(pid: int) -> list[int]:
     return []
 
 
-def _end(popen: subprocess.Popen[bytes]) -> None:
+def _end(child: Child) -> None:
     """SIGTERM by PID (the worker's nanny then ends its worker), SIGKILL what is left."""
-    pids = [popen.pid, *_children(popen.pid)]
-    if popen.poll() is None:
-        os.kill(popen.pid, signal.SIGTERM)
-    with contextlib.suppress(subprocess.TimeoutExpired):
-        popen.wait(20)
+    pids = _children(child.pid)
+    child.stop(signal.SIGTERM, 20.0)
     for pid in pids:
         with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
-    with contextlib.suppress(subprocess.TimeoutExpired):
-        popen.wait(5)
+    child.close()
 
 
 @pytest.fixture(scope="module")
@@ -114,51 +110,26 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     (port,) = free_ports(1, 1)  # socket.SOCK_STREAM
     logs = tmp_path_factory.mktemp("dask")
     address = f"tcp://127.0.0.1:{port}"
-    procs = []
+    sup = Supervisor(logs)
     try:
-        procs.append(
-            subprocess.Popen(
-                [
-                    str(BIN / "dask"),
-                    "scheduler",
-                    "--host",
-                    "127.0.0.1",
-                    "--port",
-                    str(port),
-                    "--no-dashboard",
-                    *LOOPBACK_HTTP,
-                ],
-                stdout=open(logs / "scheduler.log", "w"),
-                stderr=subprocess.STDOUT,  # noqa: SIM115
-            )
-        )
-        procs.append(
-            subprocess.Popen(
-                [
-                    str(BIN / "dask"),
-                    "worker",
-                    address,
-                    "--host",
-                    "127.0.0.1",
-                    "--nworkers",
-                    "1",
-                    "--nthreads",
-                    "1",
-                    "--no-dashboard",
-                    *LOOPBACK_HTTP,
-                ],
-                stdout=open(logs / "worker.log", "w"),
-                stderr=subprocess.STDOUT,  # noqa: SIM115
-            )
-        )
+        sup.start(
+            "scheduler",
+            [str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(port),
+             "--no-dashboard", *LOOPBACK_HTTP],
+        )  # fmt: skip
+        sup.start(
+            "worker",
+            [str(BIN / "dask"), "worker", address, "--host", "127.0.0.1", "--nworkers", "1",
+             "--nthreads", "1", "--no-dashboard", *LOOPBACK_HTTP],
+        )  # fmt: skip
         from distributed import Client
 
         with Client(address, timeout=60) as client:
             client.wait_for_workers(1, timeout=90)
         yield address
     finally:
-        for p in reversed(procs):
-            _end(p)
+        for child in reversed(sup.children):
+            _end(child)
 
 
 @pytest.fixture(scope="module")

@@ -8,14 +8,22 @@ import csv
 import json
 import os
 import signal
-import subprocess
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
-from tests.e2e.demo_support import child_pids, ftcap_hil, is_ours_and_alive, reap, wait_for
+from ftcap_hil.runtime.processes import Child
+from tests.e2e.demo_support import (
+    child_pids,
+    ftcap_hil,
+    is_ours_and_alive,
+    reap,
+    start,
+    stderr_of,
+    wait_for,
+)
 
 pytestmark = pytest.mark.e2e
 
@@ -34,14 +42,11 @@ class DemoRun:
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DemoRun]:
     out = tmp_path_factory.mktemp("demo") / "out"
-    proc = subprocess.Popen(
-        ftcap_hil("demo", "--duration", str(DURATION_S), "--out", str(out)),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
+    argv = ftcap_hil("demo", "--duration", str(DURATION_S), "--out", str(out))
+    proc = start("demo", argv, out.parent)
     try:
-        stdout, stderr = proc.communicate(timeout=DURATION_S + 150)
-        yield DemoRun(out, proc.returncode, stdout.decode(), stderr.decode())
+        code = proc.wait(DURATION_S + 150)
+        yield DemoRun(out, code, proc.output(), stderr_of(proc))
     finally:
         reap(proc, out)
 
@@ -104,12 +109,9 @@ def test_no_child_is_left_running(demo: DemoRun) -> None:
     assert not [name for name, pid in pids.items() if is_ours_and_alive(pid)]
 
 
-def _start_demo(out: Path) -> subprocess.Popen[bytes]:
-    return subprocess.Popen(
-        ftcap_hil("demo", "--duration", "60", "--out", str(out), "--no-plots"),
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
+def _start_demo(out: Path) -> Child:
+    argv = ftcap_hil("demo", "--duration", "60", "--out", str(out), "--no-plots")
+    return start("demo", argv, out.parent)
 
 
 def _all_started(out: Path) -> bool:
@@ -123,7 +125,7 @@ def test_ctrl_c_stops_every_child(tmp_path: Path) -> None:
     try:
         assert wait_for(lambda: _all_started(out), 30.0)
         assert wait_for(lambda: (out / "logs" / "gcs.log").stat().st_size > 0, 30.0)
-        proc.send_signal(signal.SIGINT)
+        proc.send(signal.SIGINT)
         assert proc.wait(60) == 130
         pids = child_pids(out)
         assert not [name for name, pid in pids.items() if is_ours_and_alive(pid)]
@@ -139,9 +141,9 @@ def test_a_dying_child_stops_the_demo_with_an_error(tmp_path: Path) -> None:
         assert wait_for(lambda: _all_started(out), 30.0)
         vessel = child_pids(out)["vessel"]
         os.kill(vessel, signal.SIGKILL)
-        _, stderr = proc.communicate(timeout=60)
-        assert proc.returncode == 1
-        assert b"vessel (pid" in stderr and b"exited early" in stderr
+        assert proc.wait(60) == 1
+        stderr = stderr_of(proc)
+        assert "vessel (pid" in stderr and "exited early" in stderr
         pids = child_pids(out)
         assert not [name for name, pid in pids.items() if is_ours_and_alive(pid)]
     finally:
@@ -163,16 +165,13 @@ def test_second_onset_flags_only_the_faulty_thrusters(tmp_path: Path) -> None:
     mission = tmp_path / "ex1-to-75s.toml"
     mission.write_text(text)
     out = tmp_path / "out"
-    proc = subprocess.Popen(
-        ftcap_hil("demo", "--mission", str(mission), "--out", str(out), "--no-plots"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
+    argv = ftcap_hil("demo", "--mission", str(mission), "--out", str(out), "--no-plots")
+    proc = start("demo", argv, tmp_path)
     try:
-        _, stderr = proc.communicate(timeout=75.0 + 150)
+        code = proc.wait(75.0 + 150)
     finally:
         reap(proc, out)
-    assert proc.returncode == 0, stderr.decode()[-3000:]
+    assert code == 0, stderr_of(proc)[-3000:]
     log = (out / "logs" / "allocator.log").read_text()
     flagged = [ln for ln in log.splitlines() if "fault detected" in ln]
     assert not [ln for ln in flagged if "thruster 2 " in ln or "thruster 4 " in ln], flagged

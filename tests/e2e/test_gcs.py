@@ -14,7 +14,7 @@ import pytest
 from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink.vessel import MavlinkVesselLink
-from tests.e2e.demo_support import free_udp_ports, ftcap_hil
+from tests.e2e.demo_support import free_udp_ports, ftcap_hil, start, stderr_of
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(60)]
 
@@ -64,26 +64,19 @@ def test_gcs_interrupted_while_waiting_for_its_peers_exits_130(tmp_path: Path) -
     # SIGINT during the start-up (nobody answers, the connect timeout is long): the shared
     # exit code of an interrupted command, at once, and nothing written
     gcs, allocator, vessel = free_udp_ports(3)
-    proc = subprocess.Popen(
-        ftcap_hil(
-            "gcs", "--mission", "paper-4.2-ex1", "--out", str(tmp_path / "out"),
-            "--gcs-port", str(gcs), "--allocator-port", str(allocator),
-            "--vessel-port", str(vessel), "--set", "gcs.connect_timeout_s=60",
-        ),
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
+    argv = ftcap_hil(
+        "gcs", "--mission", "paper-4.2-ex1", "--out", str(tmp_path / "out"),
+        "--gcs-port", str(gcs), "--allocator-port", str(allocator),
+        "--vessel-port", str(vessel), "--set", "gcs.connect_timeout_s=60",
     )  # fmt: skip
-    try:
+    with start("gcs", argv, tmp_path) as proc:
         time.sleep(4.0)  # past the imports: waiting for a HEARTBEAT
         started = time.monotonic()
-        proc.send_signal(signal.SIGINT)
-        _, stderr = proc.communicate(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 130, stderr
-    assert b"interrupted" in stderr, stderr
+        proc.send(signal.SIGINT)
+        code = proc.wait(20)
+    stderr = stderr_of(proc)
+    assert code == 130, stderr
+    assert "interrupted" in stderr, stderr
     assert time.monotonic() - started < 10.0
     assert not (tmp_path / "out" / "results.json").exists()
 

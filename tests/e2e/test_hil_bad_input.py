@@ -22,7 +22,8 @@ from pymavlink import mavutil
 
 from bridges.mavlink import dialect as mavlink_dialect
 from bridges.zenoh_io.link import make_config
-from tests.e2e.rig import ALLOCATOR_NODE, RAW_MAX, RawFrame, Rig, setpoints, wait_until
+from ftcap_hil.runtime.processes import wait_until
+from tests.e2e.rig import ALLOCATOR_NODE, RAW_MAX, RawFrame, Rig, setpoints
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 
@@ -93,9 +94,9 @@ def test_malformed_setpoints_are_dropped_and_never_reach_the_bus(
     mav = RawMavlink(hil.alloc_port)
     hil.closers.append(mav.close)
     pub = zenoh_session().declare_publisher(SETPOINT_KEY)
-    assert wait_until(lambda: pub.matching_status.matching, 20.0), alloc.log()
+    assert wait_until(lambda: pub.matching_status.matching, 20.0), alloc.output()
     with setpoints(gcs, tau=GOOD):
-        assert wait_until(lambda: len(tap.commands()) > 5, 10.0), alloc.log()
+        assert wait_until(lambda: len(tap.commands()) > 5, 10.0), alloc.output()
         time.sleep(1.0)
     before = tap.latest()
     assert before is not None and min(map(abs, before.raw)) > 0, before
@@ -113,8 +114,8 @@ def test_malformed_setpoints_are_dropped_and_never_reach_the_bus(
         "setpoint/wrench: dropped malformed sample": len(BAD_ZENOH),
     }
     assert wait_until(
-        lambda: all(alloc.log().count(text) == n for text, n in drops.items()), 10.0
-    ), {text: alloc.log().count(text) for text in drops}
+        lambda: all(alloc.output().count(text) == n for text, n in drops.items()), 10.0
+    ), {text: alloc.output().count(text) for text in drops}
     # the daemon kept cycling (3.5 Hz deadlines) on the last good setpoint, unchanged (waited
     # for, not slept for: a loaded CI machine once gave 4 frames where 5 were expected)
     assert wait_until(lambda: len(tap.commands(t_bad)) >= 5, 5.0), tap.commands(t_bad)
@@ -130,7 +131,7 @@ def test_malformed_setpoints_are_dropped_and_never_reach_the_bus(
         assert time.monotonic_ns() - t_good < 5e9, [f.raw for f in tap.commands(t_good)]
         pub.put(b'{"v":1,"X_N":0.0,"Y_N":-0.1,"N_Nm":0.0}')
         time.sleep(0.1)
-    assert wait_until(lambda: "setpoint/wrench: valid samples again" in alloc.log(), 5.0)
+    assert wait_until(lambda: "setpoint/wrench: valid samples again" in alloc.output(), 5.0)
     frames = tap.commands(source=ALLOCATOR_NODE)
     assert _in_range(frames) and tap.malformed == 0, frames
     print(f"\n{len(during)} commands while bad setpoints arrived, all {before.raw}")
@@ -151,7 +152,7 @@ def test_the_malformed_count_is_reported(hil: Rig, zenoh_session: Any) -> None:
 
     session.declare_subscriber(STATUS_KEY, on_status)
     pub = session.declare_publisher(SETPOINT_KEY)
-    assert wait_until(lambda: pub.matching_status.matching, 20.0), alloc.log()
+    assert wait_until(lambda: pub.matching_status.matching, 20.0), alloc.output()
     with setpoints(gcs, tau=GOOD):
         for surge, sway, yaw in BAD_MAVLINK:
             mav.mav.wrench_setpoint_send(0, 1, 191, surge, sway, yaw)
@@ -159,15 +160,15 @@ def test_the_malformed_count_is_reported(hil: Rig, zenoh_session: Any) -> None:
             pub.put(payload)
         time.sleep(1.5)
     alloc.send(signal.SIGTERM)
-    assert alloc.wait(15.0) == 0, alloc.log()
+    assert alloc.wait(15.0) == 0, alloc.output()
     sent = len(BAD_MAVLINK) + len(BAD_ZENOH)
     with lock:
         latest = statuses[-1] if statuses else {}
     counts = [v for k, v in latest.items() if "malformed" in k and isinstance(v, int)]
-    summary = re.search(r"stopped after .*?(\d+) malformed", alloc.log())
+    summary = re.search(r"stopped after .*?(\d+) malformed", alloc.output())
     if summary:
         counts.append(int(summary.group(1)))
-    assert any(c >= sent for c in counts), (latest, alloc.log()[-500:])
+    assert any(c >= sent for c in counts), (latest, alloc.output()[-500:])
 
 
 @pytest.mark.parametrize("huge", ["1e39", "1e308"])
@@ -178,13 +179,13 @@ def test_an_absurd_finite_zenoh_setpoint_does_not_stop_the_allocator(
     alloc = hil.start_allocator(ALONE)
     tap = hil.tap()
     pub = zenoh_session().declare_publisher(SETPOINT_KEY)
-    assert wait_until(lambda: pub.matching_status.matching, 20.0), alloc.log()
+    assert wait_until(lambda: pub.matching_status.matching, 20.0), alloc.output()
     with setpoints(gcs, tau=GOOD):
         time.sleep(1.0)
     pub.put(f'{{"v":1,"X_N":{huge},"Y_N":0.0,"N_Nm":0.0}}'.encode())
     time.sleep(1.5)
-    assert alloc.running(), alloc.log()[-3000:]
+    assert alloc.running(), alloc.output()[-3000:]
     t_good = time.monotonic_ns()
     with setpoints(gcs, tau=[-0.1, 0.0, 0.0]):
         ok = wait_until(lambda: any(_signs(f) == (-1, -1, 1, 1) for f in tap.commands(t_good)), 5)
-    assert ok and _in_range(tap.commands()), alloc.log()[-3000:]
+    assert ok and _in_range(tap.commands()), alloc.output()[-3000:]

@@ -21,7 +21,8 @@ from bridges.mavlink.config import VESSEL_IDS
 from bridges.mavlink.gcs import MavlinkGcsLink
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavResult
 from ftcap_hil.core.messages import FaultInjection, FaultKind
-from tests.e2e.rig import Rig, setpoints, wait_until
+from ftcap_hil.runtime.processes import wait_until
+from tests.e2e.rig import Rig, setpoints
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 
@@ -66,7 +67,7 @@ def test_faults_injected_over_mavlink_and_zenoh_are_estimated_while_holding_posi
         weak = FaultInjection(0, FaultKind.WEAK, 0.5)
         t0 = time.monotonic()
         for _ in range(10):  # a sample published right after matching may be lost: repeat
-            if zgcs.inject_fault(weak) and sim.wait_log("fault injected via zenoh", 1.0):
+            if zgcs.inject_fault(weak) and sim.wait_for("fault injected via zenoh", 1.0):
                 break
         t_weak = _wait_estimated(gcs, np.array([0.5, 1.0, 1.0, 1.0]), t0, WEAK_WITHIN_S)
         assert t_weak is not None, (_delta_hat(gcs), hil.logs())

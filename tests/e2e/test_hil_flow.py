@@ -15,6 +15,7 @@ import pytest
 
 from bridges.mavlink.codec import SystemStatus
 from bridges.mavlink.gcs import MavlinkGcsLink
+from ftcap_hil.runtime.processes import wait_until
 from tests.e2e.rig import (
     RAW_MAX,
     Rig,
@@ -22,7 +23,6 @@ from tests.e2e.rig import (
     record_raw,
     setpoints,
     texts,
-    wait_until,
 )
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
@@ -87,9 +87,11 @@ def test_setpoints_reach_the_thrusters_and_move_the_vessel(hil: Rig) -> None:
     assert wait_until(lambda: allocator_state(gcs) == SystemStatus.STANDBY, 5.0)
     alloc = hil.procs["allocator"]
     alloc.send(signal.SIGTERM)
-    assert alloc.wait(15.0) == 0, alloc.log()
-    m = re.search(r"setpoint received -> command sent: median (\d+) us, p99 (\d+) us", alloc.log())
-    assert m is not None, alloc.log()
+    assert alloc.wait(15.0) == 0, alloc.output()
+    m = re.search(
+        r"setpoint received -> command sent: median (\d+) us, p99 (\d+) us", alloc.output()
+    )
+    assert m is not None, alloc.output()
     print(
         f"\nsetpoint sent -> first RawCommand on the tap (ms): {np.round(reaction_ms, 1)}; -> "
         f"first with the axis' sign pattern: {np.round(settle_ms, 1)}; allocator's own "

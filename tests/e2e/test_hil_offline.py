@@ -50,7 +50,8 @@ from ftcap_hil.config.scenario import parse_scenario
 from ftcap_hil.core.models.controllers import PoseController
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.offline import run_mode
-from tests.e2e.rig import Rig, latest_odometry, odometry_state, wait_until
+from ftcap_hil.runtime.processes import wait_until
+from tests.e2e.rig import Rig, latest_odometry, odometry_state
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 

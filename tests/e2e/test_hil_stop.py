@@ -15,7 +15,8 @@ import time
 import pytest
 
 from bridges.mavlink.gcs import MavlinkGcsLink
-from tests.e2e.rig import BusTap, Proc, Rig, record_raw, setpoints, wait_until
+from ftcap_hil.runtime.processes import Child, wait_until
+from tests.e2e.rig import BusTap, Rig, record_raw, setpoints
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
 
@@ -28,7 +29,7 @@ def _u(row: dict[str, str]) -> list[float]:
     return [float(row[f"u_T{i}_N"]) for i in range(1, 5)]
 
 
-def _running_rig(hil: Rig) -> tuple[MavlinkGcsLink, Proc, BusTap]:
+def _running_rig(hil: Rig) -> tuple[MavlinkGcsLink, Child, BusTap]:
     gcs = hil.gcs()
     alloc = hil.start_allocator()
     hil.start_sim()
@@ -46,7 +47,7 @@ def test_sigterm_sends_zero_last_and_exits_0(hil: Rig) -> None:
         alloc.send(signal.SIGTERM)  # while setpoints keep coming
         code = alloc.wait(15.0)
     time.sleep(1.0)  # the tap keeps listening after the process is gone
-    assert code == 0, alloc.log()
+    assert code == 0, alloc.output()
     frames = tap.commands()
     before = [f.raw for f in frames if f.stamp_ns < t_term]
     assert before and ZERO not in before[-5:], before[-5:]  # it was thrusting
@@ -61,8 +62,8 @@ def test_sigterm_sends_zero_last_and_exits_0(hil: Rig) -> None:
     first_zero = next((r for r in rows if _u(r) == [0.0] * 4), None)
     assert first_zero is not None and first_zero["command_fresh"] == "1", first_zero
     assert float(first_zero["command_age_s"]) < COMMAND_TIMEOUT_S, first_zero
-    summary = re.search(r"stopped after (\d+) cycles, (\d+) overruns", alloc.log())
-    assert summary is not None, alloc.log()
+    summary = re.search(r"stopped after (\d+) cycles, (\d+) overruns", alloc.output())
+    assert summary is not None, alloc.output()
     print(
         f"\nSIGTERM -> first zero frame {(t_zero - t_term) * 1e-6:.1f} ms, exit 0; last frame "
         f"{frames[-1].raw}, last command-log row {logged[-1][1:]}; {summary.group(0)}"
@@ -100,7 +101,7 @@ def test_sigkill_leaves_the_sim_watchdog_to_stop_the_thrusters(hil: Rig) -> None
     assert float(tail[-1]["command_age_s"]) > 1.0, tail[-1]
     assert tap.rpm() == [0.0] * 4  # the ESCs report standstill
     sim = hil.procs["sim"]
-    assert sim.running() and "thrusters at zero" in sim.log(), sim.log()
+    assert sim.running() and "thrusters at zero" in sim.output(), sim.output()
     print(
         f"\nSIGKILL: last command {last.raw}, thrust zeroed by the sim watchdog "
         f"{stopped_after:.3f} s after it (command_timeout_s {COMMAND_TIMEOUT_S})"

@@ -11,15 +11,14 @@ from __future__ import annotations
 
 import re
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from tests.e2e.rig import Rig, wait_until
-from tests.support.mavlink_abuse import Pinger
+from ftcap_hil.runtime.processes import wait_until
+from tests.e2e.rig import Rig
+from tests.support.mavlink_abuse import Pinger, flooded, start_flood
 from tests.support.mavlink_peers import RawPeer
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(240)]
@@ -36,13 +35,7 @@ def _rss_kib(pid: int) -> int:
 def _flood(gcs: RawPeer, port: int, rate: float, seconds: float, kind: str, *extra: str) -> int:
     """Flood from a process of its own while the ground station keeps reading (its socket
     buffer would otherwise overflow and lose answers that did come)."""
-    cmd = [sys.executable, "-m", "tests.support.mavlink_abuse", str(port), str(rate)]
-    proc = subprocess.Popen([*cmd, str(seconds), kind, *extra], stdout=subprocess.PIPE, text=True)
-    while proc.poll() is None:
-        gcs.pump(0.1)
-    out, _ = proc.communicate()
-    assert proc.returncode == 0
-    return int(out.split()[-1])
+    return flooded(start_flood(port, rate, seconds, kind, *extra), lambda: gcs.pump(0.1))
 
 
 def test_the_allocator_process_survives_new_ports_fuzz_and_floods(hil: Rig) -> None:
@@ -61,7 +54,7 @@ def test_the_allocator_process_survives_new_ports_fuzz_and_floods(hil: Rig) -> N
     for rate, seconds, kind, *extra in floods:
         with Pinger(gcs, target=(1, 191)) as pings:
             sent = _flood(gcs, hil.alloc_port, rate, seconds, kind, *extra)
-        assert alloc.running(), f"died under {kind}\n{alloc.log()}"
+        assert alloc.running(), f"died under {kind}\n{alloc.output()}"
         answered = pings.answered()
         assert answered >= 0.99 * pings.sent, (kind, answered, pings.sent)
         assert sent == int(rate * seconds)
@@ -72,6 +65,8 @@ def test_the_allocator_process_survives_new_ports_fuzz_and_floods(hil: Rig) -> N
     time.sleep(11.0)  # learnt peers expire after 10 s
     assert _rss_kib(pid) - rss0 < 10 * 1024, (rss0, _rss_kib(pid))
     alloc.send(signal.SIGTERM)
-    assert alloc.wait(20.0) == 0, alloc.log()
-    assert wait_until(lambda: "allocator: stopped after" in alloc.log(), 5.0)
-    assert re.search(r"stopped after \d+ cycles, 0 overruns", alloc.log()), alloc.log()[-2000:]
+    assert alloc.wait(20.0) == 0, alloc.output()
+    assert wait_until(lambda: "allocator: stopped after" in alloc.output(), 5.0)
+    assert re.search(r"stopped after \d+ cycles, 0 overruns", alloc.output()), alloc.output()[
+        -2000:
+    ]

@@ -11,8 +11,6 @@ import csv
 import math
 import signal
 import socket
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -26,11 +24,11 @@ from bridges.can_io.bus import open_can_bus
 from bridges.can_io.force_map import ForceRawMap
 from bridges.can_io.hub import CanHub
 from bridges.mavlink.config import GCS_IDS, VESSEL_IDS, MavlinkEndpoint
-from bridges.mavlink.gcs import MavlinkGcsLink, wait_until
+from bridges.mavlink.gcs import MavlinkGcsLink
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavResult
 from bridges.zenoh_io.link import ZenohAllocatorLink, ZenohGcsLink, make_config
-from ftcap_hil.apps.demo import free_ports
 from ftcap_hil.core.messages import FaultInjection, FaultKind
+from ftcap_hil.runtime.processes import Child, free_port, ftcap_argv, wait_until
 from sim.esc_model import DEFAULT_ESC
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(180)]
@@ -41,44 +39,18 @@ ESC_IDS = [20, 21, 22, 23]
 START_TIMEOUT_S = 30.0
 
 
-def free_port(kind: int) -> int:
-    return free_ports(kind, 1)[0]
-
-
-class SimProcess:
-    """``python -m ftcap_hil sim ...`` with its log in a file."""
+class SimProcess(Child):
+    """``python -m ftcap_hil sim ...`` with its log in a file and its ``--record`` CSV;
+    :meth:`stop` is SIGTERM, then the exit code (None if it had to be killed)."""
 
     def __init__(self, tmp: Path, args: list[str]) -> None:
-        self.log_path = tmp / "sim.log"
         self.record = tmp / "record.csv"
-        cmd = [sys.executable, "-m", "ftcap_hil", "sim", "--record", str(self.record), *args]
-        self._log = open(self.log_path, "w")
-        self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, cwd=tmp)
-
-    def log(self) -> str:
-        return self.log_path.read_text()
+        argv = ftcap_argv("sim", "--record", str(self.record), *args)
+        super().__init__("sim", argv, tmp / "sim.log", cwd=tmp)
 
     def rows(self) -> list[dict[str, str]]:
         with open(self.record, newline="") as fh:
             return list(csv.DictReader(fh))
-
-    def stop(self) -> int | None:
-        """SIGTERM, then the exit code (None if it had to be killed)."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(10.0)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5.0)
-                return None
-        return self.proc.returncode
-
-    def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(5.0)
-        self._log.close()
 
 
 @pytest.fixture
@@ -157,7 +129,7 @@ def test_vessel_process_moves_reports_times_out_and_takes_faults(
             _check_running(sim, allocator, gcs, router)
             _check_motion_and_watchdog(allocator, gcs)
             _check_fault_injection(sim, allocator, gcs, zgcs)
-            assert sim.stop() == 0, sim.log()
+            assert sim.stop() == 0, sim.output()
         finally:
             sim.close()
     _check_record(sim)
@@ -174,7 +146,7 @@ def _check_running(sim: SimProcess, a: FakeAllocator, gcs: Any, router: Any) -> 
         ),
         START_TIMEOUT_S,
     )
-    assert ok, f"no ESC status, ESC NodeStatus or odometry from the sim:\n{sim.log()}"
+    assert ok, f"no ESC status, ESC NodeStatus or odometry from the sim:\n{sim.output()}"
     assert a.rpm() == [0.0, 0.0, 0.0, 0.0]
     t0 = gcs.odometry.latest().value.time_s
     time.sleep(0.5)
@@ -201,7 +173,7 @@ def _check_fault_injection(sim: SimProcess, a: FakeAllocator, gcs: Any, zgcs: An
     refused = "zenoh fault injection refused"
     assert zgcs.subscribers_matched(timeout_s=10.0)
     assert _repeat(lambda: zgcs.inject_fault(FaultInjection(2, FaultKind.OFF)),
-                   lambda: refused in sim.log()), sim.log()  # fmt: skip
+                   lambda: refused in sim.output()), sim.output()  # fmt: skip
     assert gcs.set_param(VESSEL_IDS, FAILURE_ENABLE_PARAM, 1) == 1.0
     assert gcs.inject_failure(FaultKind.OFF, 0) is MavResult.ACCEPTED
     bias = FaultInjection(1, FaultKind.BIAS, 0.02)
@@ -239,8 +211,8 @@ def _check_record(sim: SimProcess) -> None:
     assert float(last["delta_T3"]) == 1.0  # the injection refused while disabled
     assert all(float(r["delta_T3"]) == 1.0 for r in rows)
     assert float(last["north_m"]) > 0.5
-    assert "thruster T1 true fault delta 1.00 -> 0.00" in sim.log()
-    assert sim.log().count("thruster T1 true fault") == 1  # logged on the transition only
+    assert "thruster T1 true fault delta 1.00 -> 0.00" in sim.output()
+    assert sim.output().count("thruster T1 true fault") == 1  # logged on the transition only
 
 
 def test_own_hub_silent_esc_realtime_factor_and_duration(
@@ -255,13 +227,13 @@ def test_own_hub_silent_esc_realtime_factor_and_duration(
     ])  # fmt: skip
     a: FakeAllocator | None = None
     try:
-        assert wait_until(lambda: _connect(channel), START_TIMEOUT_S), sim.log()
+        assert wait_until(lambda: _connect(channel), START_TIMEOUT_S), sim.output()
         a = FakeAllocator(channel)
-        assert wait_until(lambda: a.esc.mailboxes[3].latest() is not None, 10.0), sim.log()
+        assert wait_until(lambda: a.esc.mailboxes[3].latest() is not None, 10.0), sim.output()
         time.sleep(1.0)
         assert [box.latest() is not None for box in a.esc.mailboxes] == [True, True, False, True]
         assert a.esc.node_status(20) is not None and a.esc.node_status(22) is None
-        assert sim.proc.wait(20.0) == 0, sim.log()
+        assert sim.proc.wait(20.0) == 0, sim.output()
     finally:
         if a is not None:
             a.close()
@@ -285,14 +257,14 @@ def _connect(channel: str) -> bool:
 def test_bad_config_exits_2_naming_the_key(run_sim: Callable[[list[str]], SimProcess]) -> None:
     sim = run_sim(["--set", "sim.rate_hz=0"])
     assert sim.proc.wait(30.0) == 2
-    assert "vessel.toml: [sim] rate_hz: expected a finite number > 0, got 0" in sim.log()
+    assert "vessel.toml: [sim] rate_hz: expected a finite number > 0, got 0" in sim.output()
 
 
 def test_unreachable_can_bus_exits_1(run_sim: Callable[[list[str]], SimProcess]) -> None:
     port = free_port(socket.SOCK_STREAM)  # nobody listens there
     sim = run_sim(["--set", f"can.channel=127.0.0.1:{port}", "--set", "zenoh.enabled=false"])
     assert sim.proc.wait(30.0) == 1
-    assert "can:" in sim.log() and str(port) in sim.log()
+    assert "can:" in sim.output() and str(port) in sim.output()
 
 
 def test_sigint_also_exits_0(hub: CanHub, run_sim: Callable[[list[str]], SimProcess]) -> None:
@@ -301,7 +273,7 @@ def test_sigint_also_exits_0(hub: CanHub, run_sim: Callable[[list[str]], SimProc
         "--set", f"can.channel={hub.channel}", "--set", "zenoh.enabled=false",
         "--set", f"mavlink.connection=udpin:127.0.0.1:{udp}", "--set", "mavlink.peers=[]",
     ])  # fmt: skip
-    assert wait_until(lambda: "simulated vessel running" in sim.log(), START_TIMEOUT_S)
+    assert wait_until(lambda: "simulated vessel running" in sim.output(), START_TIMEOUT_S)
     sim.proc.send_signal(signal.SIGINT)
-    assert sim.proc.wait(10.0) == 0, sim.log()
-    assert "stopped at sim time" in sim.log()
+    assert sim.proc.wait(10.0) == 0, sim.output()
+    assert "stopped at sim time" in sim.output()

@@ -6,7 +6,8 @@ MAVLink 1 frames, valid frames from an unknown system (setpoints, parameter writ
 injections, parameter list requests), frames signed with a wrong key, oversized datagrams
 and datagrams of many frames. :func:`flood` sends datagrams at a rate, from one socket or a
 new source port per datagram; ``python -m tests.support.mavlink_abuse PORT RATE SECONDS
-KIND [--new-ports]`` runs it in a process of its own and prints the number sent.
+KIND [--new-ports]`` runs it in a process of its own and prints the number sent
+(:func:`start_flood` starts one, :func:`flooded` reads the number).
 
 :func:`udp_drops` reads the kernel's drop counter of a bound UDP port (``/proc/net/udp``),
 so a test can account for every datagram: sent = dropped by the kernel + seen by the port.
@@ -27,8 +28,10 @@ from typing import Any
 import numpy as np
 
 from bridges.mavlink import dialect as mavlink_dialect
+from ftcap_hil.runtime.processes import Child
 
 DIALECT = mavlink_dialect.load()
+ROOT = Path(__file__).resolve().parents[2]
 STRANGER = (77, 1)
 KINDS = (
     "random", "empty", "bad_crc", "truncated", "bad_length", "mavlink1", "stranger_setpoint",
@@ -174,6 +177,33 @@ class Pinger:
     def answered(self) -> int:
         self.gcs.pump(0.5)
         return len([m for m in self.gcs.of_type("PARAM_VALUE") if m.param_id == self.name])
+
+
+def start_flood(port: int, rate: float, seconds: float, kind: str, *extra: str) -> Child:
+    """:func:`flood` of ``kind`` at ``rate`` datagrams/s for ``seconds`` to ``port`` in a
+    process of its own (``extra``: ``--new-ports``)."""
+    argv = [sys.executable, "-m", "tests.support.mavlink_abuse", str(port), str(rate)]
+    return Child("flood", [*argv, str(seconds), kind, *extra], stderr="inherit", cwd=ROOT)
+
+
+def flooded(
+    proc: Child, meanwhile: Callable[[], None] | None = None, timeout_s: float = 60.0
+) -> int:
+    """How many datagrams the flood process ``proc`` sent, once it exited (within
+    ``timeout_s``); ``meanwhile()`` is called until then (a ground station reading its
+    socket)."""
+    with proc:
+        deadline = time.monotonic() + timeout_s
+        while proc.running() and time.monotonic() < deadline:
+            if meanwhile is not None:
+                meanwhile()
+            else:
+                proc.wait(0.1)
+        code = proc.wait(0.0)
+        out = proc.output()
+    if code != 0:
+        raise RuntimeError(f"the flood process failed (exit {code}): {out[-500:]!r}")
+    return int(out.split()[-1])
 
 
 def udp_drops(port: int) -> int:

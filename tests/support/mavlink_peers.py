@@ -20,8 +20,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from bridges.mavlink import dialect as mavlink_dialect  # noqa: E402
-from bridges.mavlink.gcs import wait_until as poll_until  # noqa: E402
-from ftcap_hil.apps.demo import free_ports  # noqa: E402
+from ftcap_hil.runtime.processes import free_ports  # noqa: E402
+from ftcap_hil.runtime.processes import wait_until as poll_until  # noqa: E402
 
 DIALECT = mavlink_dialect.load()
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 
 from ftcap_hil.core.status import Severity
+from ftcap_hil.ports.transitions import TransitionLog
 from ftcap_hil.runtime.esc_watchdog import EscWatchdog
-from ftcap_hil.runtime.transitions import TransitionLog
 
 S = 1_000_000_000  # ns
 TIMEOUT_S = 0.5

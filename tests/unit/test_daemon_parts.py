@@ -16,6 +16,7 @@ import time
 import numpy as np
 import pytest
 
+from bridges.mavlink.allocator_params import tunables_of
 from ftcap_hil.config.daemon import DaemonConfig
 from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
@@ -25,6 +26,8 @@ from ftcap_hil.core.messages import EscStatus, Odometry, WrenchSetpoint
 from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox, Stamped
+from ftcap_hil.ports.transitions import TransitionLog
+from ftcap_hil.ports.tunables import LiveTunables
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.daemon import AllocatorDaemon, Ports
 from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
@@ -39,7 +42,6 @@ from ftcap_hil.runtime.status_report import (
     announce_cycle,
     assemble_status,
 )
-from ftcap_hil.runtime.transitions import TransitionLog
 
 S = 1_000_000_000
 MS = 1_000_000
@@ -364,8 +366,8 @@ class Params:
         self.generation = 0
         self._values = values
 
-    def values(self) -> dict[str, float]:
-        return dict(self._values)
+    def tunables(self) -> LiveTunables:
+        return tunables_of(self._values)
 
     def set(self, name: str, value: float) -> None:
         self._values[name] = value

@@ -10,8 +10,8 @@ from ftcap_hil.core.cycle import CoreConfig, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.status import Mode
+from ftcap_hil.ports.transitions import TransitionLog
 from ftcap_hil.runtime.esc_watchdog import EscStallMonitor
-from ftcap_hil.runtime.transitions import TransitionLog
 
 RANGE = np.full(4, 0.1)
 FRESH = np.zeros(4)

@@ -13,9 +13,9 @@ import pytest
 
 from ftcap_hil.core.status import Severity
 from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.ports.transitions import TransitionLog, log_to
 from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
 from ftcap_hil.runtime.signals import ForcedExit, capture_signals
-from ftcap_hil.runtime.transitions import TransitionLog, log_to
 
 
 class FakeClock:
@@ -182,3 +182,30 @@ def test_off_severity_and_the_logger_announce(caplog: pytest.LogCaptureFixture) 
         (logging.WARNING, "ESC 1 silent"),
         (logging.WARNING, "ESC 1 back"),
     ]
+
+
+def test_a_key_that_keeps_flipping_is_announced_once_per_interval() -> None:
+    clock = FakeClock()
+    said: list[str] = []
+    held: list[str] = []
+    log = TransitionLog(
+        lambda text, _sev: said.append(text),
+        min_interval_s=5.0,
+        quiet=lambda text, _sev: held.append(text),
+        clock=clock,
+    )
+    assert log.update("port", True, "failing", "working")  # t = 0: said
+    clock.now = 1_000_000_000
+    assert log.update("port", False, "failing", "working")  # 1 s later: held back
+    clock.now = 2_000_000_000
+    assert log.update("port", True, "failing", "working")  # held back
+    assert log.update("other", True, "other failing")  # another key has its own interval
+    clock.now = 5_000_000_000
+    assert log.update("port", False, "failing", "working")  # 5 s after the last line: said
+    assert said == [
+        "failing",
+        "other failing",
+        "working (2 changes not logged since the last line)",
+    ]
+    assert held == ["working", "failing"]
+    assert log["port"] is False and log["other"] is True

@@ -379,7 +379,7 @@ def test_cli_module_imports_no_transport() -> None:
 
 
 class _NoPorts:
-    """VesselPorts with nothing connected: no command, no fault, outputs dropped."""
+    """A VesselIO with nothing connected: no command, no fault, outputs dropped."""
 
     def latest_command(self) -> None:
         return None

@@ -45,6 +45,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from ftcap_hil.core.errors import FtcapError
+from ftcap_hil.runtime.processes import Child, free_ports, ftcap_argv
 
 SYNC_ID = 0x7FF  # 11-bit frame cansend puts on the bus to see candump listening (not DroneCAN)
 T_S = 0.2827  # the paper's sample time: the ground station's period (3.54 Hz)
@@ -69,53 +70,6 @@ ALLOCATOR_SETTINGS = [
 ]
 
 
-class Child:
-    """A subprocess with its output in a file; stopped by its PID only."""
-
-    def __init__(
-        self, name: str, argv: list[str], log_path: Path, err_path: Path | None = None
-    ) -> None:
-        """stdout to ``log_path``; stderr there too, or to ``err_path`` if given."""
-        self.name, self.argv, self.log_path = name, argv, log_path
-        self._log = open(log_path, "wb")  # noqa: SIM115 - closed in close()
-        self._err = open(err_path, "wb") if err_path else None  # noqa: SIM115 - as _log
-        self.proc = subprocess.Popen(
-            argv,
-            stdin=subprocess.DEVNULL,
-            stdout=self._log,
-            stderr=self._err or subprocess.STDOUT,
-        )
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def text(self) -> str:
-        try:
-            return self.log_path.read_text(errors="replace")
-        except FileNotFoundError:
-            return ""
-
-    def stop(self, timeout_s: float, sig: int = signal.SIGTERM) -> int | None:
-        """``sig``, then the exit code; None if it had to be killed after ``timeout_s``."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(10)
-                return None
-        return self.proc.returncode
-
-    def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(10)
-        self._log.close()
-        if self._err is not None:
-            self._err.close()
-
-
 class StepError(RuntimeError):
     """A step of the run failed; the message says which and why."""
 
@@ -127,23 +81,13 @@ def wait_for(what: str, predicate: Callable[[], Any], timeout_s: float, alive: l
         if value:
             return value
         for child in alive:
-            if not child.alive():
+            if not child.running():
                 raise StepError(
                     f"{child.name} exited ({child.proc.returncode}) while waiting for {what}"
                 )
         if time.monotonic() > deadline:
             raise StepError(f"no {what} after {timeout_s:g} s")
         time.sleep(0.1)
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "ftcap_hil", *args]
 
 
 def sets(items: list[str]) -> list[str]:
@@ -164,7 +108,7 @@ class Capture:
         if bus == "socketcan":
             # stderr apart: candump says "read: Network is down" when the interface goes
             argv = ["candump", "-L", channel]
-            self.child = Child("candump", argv, path, path.with_suffix(".err"))
+            self.child = Child("candump", argv, path, stderr=path.with_suffix(".err"))
         else:
             self._thread = threading.Thread(target=self._hub_logger, daemon=True)
             self._thread.start()
@@ -194,15 +138,15 @@ class Capture:
                 ["cansend", self.channel, f"{SYNC_ID:03X}#53594E43"], check=False, timeout=30
             )
             time.sleep(0.3)
-            return needle in self.child.text() if self.child else False
+            return needle in self.child.output() if self.child else False
 
         wait_for("sync frame in the capture", seen, 120.0, [self.child])
 
     def stop(self) -> int | None:
         if self.child is not None:
-            if self.child.alive():
+            if self.child.running():
                 time.sleep(0.5)  # the last frames reach the file
-            return self.child.stop(10.0, signal.SIGINT)
+            return self.child.stop(signal.SIGINT, 10.0)
         self._stop.set()
         if self._thread is not None:
             self._thread.join(5)
@@ -226,7 +170,7 @@ def _alive(children: list[Child]) -> Callable[[], None]:
 
     def check() -> None:
         for child in children:
-            if not child.alive():
+            if not child.running():
                 raise StepError(f"{child.name} exited ({child.proc.returncode})")
 
     return check
@@ -338,7 +282,7 @@ def start_peers(
     gcs_port, vessel_port, alloc_port = ports
     sim = Child(
         "sim",
-        cli("sim", "--record", str(out / "record.csv"), *sets([
+        ftcap_argv("sim", "--record", str(out / "record.csv"), *sets([
             *can, "zenoh.enabled=false", *SIM_SETTINGS, *opts.sim_set,
             f'mavlink.connection="udpin:127.0.0.1:{vessel_port}"',
             f'mavlink.peers=["127.0.0.1:{alloc_port}", "127.0.0.1:{gcs_port}"]',
@@ -348,7 +292,7 @@ def start_peers(
     children.append(sim)
     alloc = Child(
         "allocator",
-        cli("allocator", "--command-log", str(out / "commands.csv"), *sets([
+        ftcap_argv("allocator", "--command-log", str(out / "commands.csv"), *sets([
             *can, "zenoh.enabled=false", *ALLOCATOR_SETTINGS,
             f'mavlink.connection="udpin:127.0.0.1:{alloc_port}"',
             f'mavlink.peers=["127.0.0.1:{gcs_port}"]',
@@ -364,7 +308,7 @@ def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
     from bridges.mavlink.gcs import MavlinkGcsLink
 
     out: Path = opts.out
-    gcs_port, vessel_port, alloc_port = free_udp_port(), free_udp_port(), free_udp_port()
+    gcs_port, vessel_port, alloc_port = free_ports(socket.SOCK_DGRAM, 3)
     children: list[Child] = []
     capture: Capture | None = None
     hub = None
@@ -389,9 +333,9 @@ def run_hil(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
             # injected fault stays on the vessel (its record is the truth they compare with).
             summary["sigterm_wall"] = time.time()
             summary["sigterm_monotonic"] = time.monotonic()
-            summary["allocator_exit"] = alloc.stop(opts.stop_timeout_s)
+            summary["allocator_exit"] = alloc.stop(signal.SIGTERM, opts.stop_timeout_s)
             summary["allocator_exited_wall"] = time.time()
-        summary["sim_exit"] = sim.stop(opts.stop_timeout_s)
+        summary["sim_exit"] = sim.stop(signal.SIGTERM, opts.stop_timeout_s)
         summary["capture_exit"] = capture.stop()
         result = summary["injection"]["result"]
         if flight.plan.injections and result != "ACCEPTED":
@@ -446,7 +390,7 @@ def run_idle(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
         captures[0].wait_listening(opts.start_timeout_s)
         alloc = Child(
             "allocator",
-            cli("allocator", "--duration", f"{opts.seconds:g}",
+            ftcap_argv("allocator", "--duration", f"{opts.seconds:g}",
                 "--command-log", str(out / "commands.csv"), *sets([
                     *bus_settings(opts.bus, channel), "can.esc_monitor=false",
                     "mavlink.enabled=false", "zenoh.enabled=false",
@@ -456,7 +400,7 @@ def run_idle(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
         )  # fmt: skip
         wait_for(
             "the allocator's start-up line",
-            lambda: "allocator: " in alloc.text() and " Hz, " in alloc.text(),
+            lambda: "allocator: " in alloc.output() and " Hz, " in alloc.output(),
             opts.start_timeout_s,
             [alloc],
         )
@@ -474,7 +418,7 @@ def run_idle(opts: argparse.Namespace, summary: dict[str, Any]) -> None:
             rc = alloc.proc.wait(opts.seconds + opts.stop_timeout_s)
         except subprocess.TimeoutExpired:
             summary.setdefault("errors", []).append("the allocator outlived its --duration")
-            rc = alloc.stop(opts.stop_timeout_s)
+            rc = alloc.stop(signal.SIGTERM, opts.stop_timeout_s)
         summary["allocator_exit"] = rc
         summary["allocator_exited_monotonic"] = time.monotonic()
         summary["capture_exit"] = captures[-1].stop()

@@ -1,5 +1,7 @@
-"""How the allocator daemon's ports are opened from its configuration: CAN (thruster
-commands out, ESC status in), MAVLink and Zenoh (setpoints and telemetry in, status out).
+"""The allocator daemon's ports opened from its configuration and handed to the daemon
+(:class:`~ftcap_hil.runtime.daemon.Ports`): CAN (thruster commands out, ESC status in),
+MAVLink and Zenoh (setpoints and telemetry in, status out), and the MAVLink parameter table
+read as the daemon's live tunables.
 
 The bridges are imported here, lazily, so that building the ``ftcap-hil`` parser does not
 import the networking stacks. Everything opened is entered into the caller's ``ExitStack``
@@ -106,7 +108,7 @@ def build_ports(
     cmd_log: CommandLog | None,
 ) -> tuple[Ports, Any]:
     """The daemon's ports from ``cfg``'s [can], [mavlink] and [zenoh] tables, and the
-    MAVLink parameter server (None without MAVLink). The ESC command stream (unless
+    MAVLink parameter table as live tunables (None without MAVLink). The ESC command stream (unless
     ``esc_rate_hz = 0``) re-sends the latest command from here on."""
     sink, esc = open_can(cfg, stack)
     ports = Ports(
@@ -130,12 +132,12 @@ def build_ports(
 
 def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports) -> Any:
     """MAVLink setpoints, manual input, odometry and status onto ``ports`` (unless
-    ``[mavlink] enabled = false``); the link's parameter server, or None."""
+    ``[mavlink] enabled = false``); the link's parameter table as live tunables, or None."""
     mav_cfg = cfg.ports.mavlink
     if mav_cfg is None:
         return None
     from bridges.mavlink import allocator as mav
-    from bridges.mavlink.allocator_params import allocator_param_specs
+    from bridges.mavlink.allocator_params import AllocatorTunables, allocator_param_specs
     from bridges.mavlink.status import MavlinkStatusSink
 
     d = cfg.daemon
@@ -161,7 +163,7 @@ def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Por
     ports.setpoints += [link.setpoint, link.manual]
     ports.telemetry.append(link.odometry)
     ports.status.append(MavlinkStatusSink(link))
-    return link.params
+    return AllocatorTunables(link.params)
 
 
 def open_zenoh(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports) -> None:

@@ -1,0 +1,1 @@
+"""Helpers shared by the test tiers and the benchmarks (no tests here)."""

@@ -1,8 +1,8 @@
 """The standard ROS 2 message types this bridge and the MCAP recordings use, as ``.msg`` text.
 
 Fields as the ROS 2 interface packages define them (``builtin_interfaces``, ``std_msgs``,
-``geometry_msgs``, ``nav_msgs``, ``diagnostic_msgs``, ``rcl_interfaces``), comments left
-out; nested types spelled ``pkg/Name``. Their REP-2011 hashes are checked against the
+``geometry_msgs``, ``nav_msgs``, ``diagnostic_msgs``, ``rcl_interfaces``, ``tf2_msgs``),
+comments left out; nested types spelled ``pkg/Name``. Their REP-2011 hashes are checked against the
 published ones in ``tests/unit/test_ros2_type_hash.py``: a wrong field name, type or order
 changes the hash. The project's own types (``ftcap_msgs``) are the shipped ``.msg`` files
 of :data:`FTCAP_MSGS_DIR`; :func:`registry` holds both.
@@ -43,6 +43,13 @@ STANDARD: dict[str, str] = {
     "geometry_msgs/msg/TwistWithCovariance": "geometry_msgs/Twist twist\nfloat64[36] covariance\n",
     "geometry_msgs/msg/Wrench": "geometry_msgs/Vector3 force\ngeometry_msgs/Vector3 torque\n",
     "geometry_msgs/msg/WrenchStamped": "std_msgs/Header header\ngeometry_msgs/Wrench wrench\n",
+    "geometry_msgs/msg/Transform": (
+        "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n"
+    ),
+    "geometry_msgs/msg/TransformStamped": (
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n"
+    ),
+    "tf2_msgs/msg/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
     "nav_msgs/msg/Odometry": (
         "std_msgs/Header header\nstring child_frame_id\n"
         "geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n"

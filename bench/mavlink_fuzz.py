@@ -2,7 +2,7 @@
 
 One in-process ``MavlinkAllocatorLink`` (the real parameter table, optionally with a signing
 key) on loopback; the abuse comes from processes of their own
-(``python -m tests.contract.mavlink_abuse``); a bare-pymavlink ground station on the link's
+(``python -m tests.support.mavlink_abuse``); a bare-pymavlink ground station on the link's
 configured peer reads a parameter every 50 ms throughout. Phases:
 
 1. ``fuzz``: ``--fuzz`` datagrams (default 10**5) of every abuse kind, a new source port each;
@@ -38,14 +38,14 @@ from bridges.mavlink.config import ALLOCATOR_IDS, MavlinkEndpoint  # noqa: E402
 from bridges.mavlink.peers import TrafficLimits  # noqa: E402
 from bridges.mavlink.signing import passphrase_to_key, signing_timestamp  # noqa: E402
 from ftcap_hil.core.cycle import CoreConfig  # noqa: E402
-from tests.contract.mavlink_abuse import Pinger, rss_bytes, udp_drops  # noqa: E402
-from tests.contract.mavlink_support import RawPeer, free_udp_ports  # noqa: E402
+from tests.support.mavlink_abuse import Pinger, rss_bytes, udp_drops  # noqa: E402
+from tests.support.mavlink_peers import RawPeer, free_udp_ports  # noqa: E402
 
 PASSPHRASE = "ftcap-bench"
 
 
 def _flood(gcs: RawPeer, port: int, rate: float, seconds: float, kind: str, *extra: str) -> int:
-    cmd = [sys.executable, "-m", "tests.contract.mavlink_abuse", str(port), str(rate)]
+    cmd = [sys.executable, "-m", "tests.support.mavlink_abuse", str(port), str(rate)]
     proc = subprocess.Popen(
         [*cmd, str(seconds), kind, *extra], stdout=subprocess.PIPE, text=True, cwd=ROOT
     )

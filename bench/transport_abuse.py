@@ -37,7 +37,7 @@ from bridges.can_io.bus import open_can_bus  # noqa: E402
 from bridges.can_io.codec import CanFrame, TransferAssembler, encode_raw_command  # noqa: E402
 from bridges.can_io.force_map import ForceRawMap  # noqa: E402
 from bridges.can_io.hub import CanHub  # noqa: E402
-from tests.fuzz.payloads import can_frames  # noqa: E402
+from tests.support.payloads import can_frames  # noqa: E402
 
 FMAP = ForceRawMap.create([10.0, 10.0])
 
@@ -166,7 +166,7 @@ PUBLISHER = textwrap.dedent(
     import json, sys, time, zenoh
     sys.path.insert(0, sys.argv[3])
     from bridges.zenoh_io.link import make_config
-    from tests.fuzz.payloads import zenoh_payloads
+    from tests.support.payloads import zenoh_payloads
     port, n, seed = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[4])
     base = {"v": 1, "X_N": 10.0, "Y_N": -5.0, "N_Nm": 1.0}
     with zenoh.open(make_config("client", port)) as s:

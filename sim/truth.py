@@ -1,7 +1,8 @@
 """The vessel's truth: dynamics, environment, thrusters and sensor in one pure model.
 
-One model, two shells: the offline simulator (``ftcap_hil.runtime.offline``) and the
-simulated vessel process both step a :class:`TruthModel`. It is separate from what the
+The offline simulator (``ftcap_hil.runtime.offline``) steps a :class:`TruthModel` when a
+scenario has a truth (the realistic scenarios); the simulated vessel process (``ftcap-hil
+sim``) does not: it steps the plant of ``sim/vessel.py``. The truth is separate from what the
 allocator is told (its own plant and thruster geometry): a scenario states both, or a
 mismatch on top of a preset. Per step of ``dt_s`` with the commands ``u`` (m,) N held::
 

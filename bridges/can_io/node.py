@@ -33,7 +33,6 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from itertools import zip_longest
 
 import can
 import dronecan
@@ -340,7 +339,7 @@ def health_for(status: AllocatorStatus) -> Health:
     OK         otherwise
     =========  ==========================================================================
     """
-    flagged = [f or e for f, e in zip_longest(status.faulty, status.esc_failed, fillvalue=False)]
+    flagged = status.flagged
     if status.degraded or any(status.esc_failed) or (flagged and all(flagged)):
         return Health.ERROR
     if (

@@ -45,7 +45,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from itertools import zip_longest
 from typing import Any
 
 import numpy as np
@@ -54,9 +53,10 @@ from bridges.mavlink.codec import (
     MAX_THRUSTERS,
     SystemStatus,
     bitmask,
+    dialect_message,
     odometry_from_message,
     padded,
-    status_flags,
+    status_fields,
 )
 from bridges.mavlink.commands import CommandService
 from bridges.mavlink.config import (
@@ -225,9 +225,9 @@ class MavlinkAllocatorLink(PortOwner):
         n = self.config.n_thrusters
         if u.shape != (n,):
             raise ValueError(f"thruster command: expected shape ({n},)")
-        t_ms = self._port.time_boot_ms()
-        newtons = padded(u, MAX_THRUSTERS, "u")
-        ok = self._port.send(lambda mav: mav.ftcap_thrust_send(t_ms, newtons, n))
+        fields = {"time_boot_ms": self._port.time_boot_ms(), "u": u, "n_thrusters": n}
+        thrust = dialect_message(self._port.dialect, "FTCAP_THRUST", fields)
+        ok = self._port.send(lambda mav: mav.send(thrust))
         if self.config.u_max is None:
             return ok
         outputs = padded(np.clip(u / np.asarray(self.config.u_max), -1.0, 1.0), 32, "actuator")
@@ -239,24 +239,11 @@ class MavlinkAllocatorLink(PortOwner):
         )
 
     def send_status(self, status: AllocatorStatus) -> bool:
-        """FTCAP_STATUS for one cycle (the daemon decimates); fields as in the dialect."""
-        n = self.config.n_thrusters
-        if len(status.delta_hat) != n or len(status.f_hat) != n:
-            raise ValueError(f"status: delta_hat and f_hat must have {n} entries")
-        fields = (
-            self._port.time_boot_ms(),
-            padded(status.tau_demand or (0.0,) * 3, 3, "tau_demand"),
-            padded(status.unallocated or (0.0,) * 3, 3, "tau_unallocated"),
-            padded(status.delta_hat, MAX_THRUSTERS, "delta_hat"),
-            padded(status.f_hat, MAX_THRUSTERS, "f_hat"),
-            int(status_flags(status)),
-            n,
-            bitmask(tuple(a or b for a, b in zip_longest(status.faulty, status.esc_failed))),
-            bitmask(status.saturated),
-            bitmask(status.probing),
-            padded(status.delta_std[:n], MAX_THRUSTERS, "delta_hat_std"),
-        )
-        return self._port.send(lambda mav: mav.ftcap_status_send(*fields))
+        """FTCAP_STATUS for one cycle (the daemon decimates): the status's fields by name
+        (:func:`~bridges.mavlink.codec.status_fields`) as the dialect lays them out."""
+        fields = status_fields(status, self._port.time_boot_ms())
+        msg = dialect_message(self._port.dialect, "FTCAP_STATUS", fields)
+        return self._port.send(lambda mav: mav.send(msg))
 
     def send_esc_status(
         self,
@@ -267,16 +254,16 @@ class MavlinkAllocatorLink(PortOwner):
     ) -> bool:
         """FTCAP_ESC_STATUS: per-thruster ESC telemetry (NaN = unknown, +inf age = never)."""
         n = self.config.n_thrusters
-        mask = bitmask(tuple(failed))
-        fields = (
-            self._port.time_boot_ms(),
-            padded(rpm, 16, "rpm"),
-            padded(current, 16, "current"),
-            padded(age, 16, "age"),
-            mask,
-            n,
-        )
-        ok = self._port.send(lambda mav: mav.ftcap_esc_status_send(*fields))
+        fields = {
+            "time_boot_ms": self._port.time_boot_ms(),
+            "rpm": rpm,
+            "current": current,
+            "age": age,
+            "failed": bitmask(tuple(failed)),
+            "n_thrusters": n,
+        }
+        msg = dialect_message(self._port.dialect, "FTCAP_ESC_STATUS", fields)
+        ok = self._port.send(lambda mav: mav.send(msg))
         standard = send_standard_esc(self._port, rpm, current, age, failed, n, self._esc_info)
         return standard and ok
 

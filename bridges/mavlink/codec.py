@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Mapping
 from types import ModuleType
 from typing import Any
 
@@ -126,38 +127,80 @@ def bits(mask: int, n: int) -> tuple[bool, ...]:
     return tuple(bool(mask >> i & 1) for i in range(n))
 
 
+def dialect_message(dialect: ModuleType, name: str, fields: Mapping[str, Any]) -> Any:
+    """Message ``name`` (e.g. ``"FTCAP_STATUS"``) of ``dialect`` built from its fields by
+    name, each array zero-padded to its length in the dialect (MAVLink arrays are fixed).
+    ValueError naming the message for a field it does not have or lacks (extensions
+    included), or an array longer than the dialect's."""
+    cls = getattr(dialect, f"MAVLink_{name.lower()}_message")
+    lengths: dict[str, int] = dict(zip(cls.fieldnames, cls.array_lengths, strict=True))
+    if fields.keys() != lengths.keys():
+        missing = sorted(lengths.keys() - fields.keys())
+        unknown = sorted(fields.keys() - lengths.keys())
+        raise ValueError(f"{name}: missing fields {missing}, unknown fields {unknown}")
+    arrays = {k: padded(v, n, f"{name}.{k}") for k, v in fields.items() if (n := lengths[k])}
+    return cls(**{**fields, **arrays})
+
+
+def message_fields(msg: Any) -> dict[str, Any]:
+    """A received message's fields by name, as its dialect lists them."""
+    return {name: getattr(msg, name) for name in msg.fieldnames}
+
+
+def status_fields(st: AllocatorStatus, time_boot_ms: int) -> dict[str, Any]:
+    """FTCAP_STATUS's fields of a status, by name (arrays unpadded: :func:`dialect_message`).
+
+    ``n_thrusters`` is the status's m; ``faulty`` marks a thruster flagged by the estimator
+    or failed by its ESC watchdog; a wrench the status does not carry is sent as zeros, a
+    ``delta_std`` it does not carry as zeros ("known exactly", as the dialect says).
+    """
+    return {
+        "time_boot_ms": time_boot_ms,
+        "tau_demand": st.tau_demand or (0.0,) * 3,
+        "tau_unallocated": st.unallocated or (0.0,) * 3,
+        "delta_hat": st.delta_hat,
+        "f_hat": st.f_hat,
+        "flags": int(status_flags(st)),
+        "n_thrusters": st.m,
+        "faulty": bitmask(st.flagged),
+        "saturated": bitmask(st.saturated),
+        "probing": bitmask(st.probing),
+        "delta_hat_std": st.delta_std,
+    }
+
+
 def status_from_message(msg: Any) -> AllocatorStatus:
-    """FTCAP_STATUS -> AllocatorStatus (fields it does not carry keep their defaults).
+    """FTCAP_STATUS -> AllocatorStatus (:func:`status_from_fields` of its fields by name)."""
+    return status_from_fields(message_fields(msg))
+
+
+def status_from_fields(fields: Mapping[str, Any]) -> AllocatorStatus:
+    """FTCAP_STATUS's fields by name -> AllocatorStatus (fields it does not carry keep their
+    defaults); built by :meth:`AllocatorStatus.checked`.
 
     A sender without the extension fields (masks read as 0, ``delta_hat_std`` as zeros)
     gives per-thruster ``faulty`` from FAULT_DETECTED alone: every thruster is then marked
-    when any is. ``delta_std`` may hold NaN (unknown). Raises
-    MalformedMessage for n_thrusters > 16 or non-finite values.
+    when any is. ``delta_std`` may hold NaN (unknown). Raises MalformedMessage for
+    n_thrusters > 16 or non-finite values.
     """
-    n = int(msg.n_thrusters)
+    n = int(fields["n_thrusters"])
     if n > MAX_THRUSTERS:
         raise MalformedMessage(f"FTCAP_STATUS n_thrusters {n} > {MAX_THRUSTERS}")
-    arrays = [np.asarray(a, dtype=np.float64) for a in (msg.tau_demand, msg.tau_unallocated)]
-    arrays += [np.asarray(a[:n], dtype=np.float64) for a in (msg.delta_hat, msg.f_hat)]
-    if not all(np.all(np.isfinite(a)) for a in arrays):
-        raise MalformedMessage("FTCAP_STATUS: non-finite values")
-    flags = StatusFlag(int(msg.flags) & sum(StatusFlag))
-    faulty = bits(int(getattr(msg, "faulty", 0)), n)
+    flags = StatusFlag(int(fields["flags"]) & sum(StatusFlag))
+    faulty = bits(int(fields.get("faulty", 0)), n)
     if StatusFlag.FAULT_DETECTED in flags and not any(faulty):
         faulty = (True,) * n
-    tau, unallocated, delta_hat, f_hat = (tuple(a.tolist()) for a in arrays)
-    std = getattr(msg, "delta_hat_std", None)
-    delta_std = () if std is None else tuple(float(v) for v in std[:n])
-    return AllocatorStatus(
+    std = fields.get("delta_hat_std")
+    return AllocatorStatus.checked(
         degraded=StatusFlag.DEGRADED in flags,
         setpoint_stale=StatusFlag.SETPOINT_STALE in flags,
         telemetry_stale=StatusFlag.TELEMETRY_STALE in flags,
-        delta_hat=delta_hat,
-        delta_std=delta_std,
-        f_hat=f_hat,
-        tau_demand=tau,
-        unallocated=unallocated,
-        saturated=bits(int(getattr(msg, "saturated", 0)), n),
+        delta_hat=fields["delta_hat"][:n],
+        delta_std=() if std is None else std[:n],
+        f_hat=fields["f_hat"][:n],
+        tau_demand=fields["tau_demand"],
+        unallocated=fields["tau_unallocated"],
+        saturated=bits(int(fields.get("saturated", 0)), n),
         faulty=faulty,
-        probing=bits(int(getattr(msg, "probing", 0)), n),
+        probing=bits(int(fields.get("probing", 0)), n),
     )

@@ -12,7 +12,6 @@ from __future__ import annotations
 from bridges.mavlink.allocator import MavlinkAllocatorLink
 from bridges.mavlink.codec import Severity as MavSeverity
 from bridges.mavlink.codec import SystemStatus
-from ftcap_hil.core.messages import ThrusterCommand
 from ftcap_hil.core.status import AllocatorStatus, Severity
 
 _SEVERITY = {
@@ -29,10 +28,11 @@ class MavlinkStatusSink:
         self._link = link
 
     def publish(self, st: AllocatorStatus) -> None:
-        """Send one status; the first call ends the link's MAV_STATE_BOOT."""
+        """Send one status (checked when built: ``AllocatorStatus.checked``); the first call
+        ends the link's MAV_STATE_BOOT."""
         state = SystemStatus.STANDBY if st.setpoint_stale else SystemStatus.ACTIVE
         self._link.set_system_status(state)
-        self._link.send_thruster_commands(ThrusterCommand.checked(st.u))
+        self._link.send_thruster_commands(st.command)
         if st.esc_age_s:
             self._link.send_esc_status(st.esc_rpm, st.esc_current_a, st.esc_age_s, st.esc_failed)
         self._link.send_status(st)

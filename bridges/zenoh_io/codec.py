@@ -212,36 +212,39 @@ def decode_fault_injection(payload: bytes | str, m: int | None = None) -> FaultI
 
 
 def encode_status(status: AllocatorStatus) -> bytes:
-    """Encode a status; raise MalformedMessage for mismatched lengths or non-finite values."""
+    """Encode a status (checked when built: :meth:`AllocatorStatus.checked`); a wrench it
+    does not carry is written as zeros. ``u``, ``f_hat`` and ``saturated`` are v1 fields a
+    reader needs for every thruster: a status without them (one decoded from MAVLink) is
+    written as it is and refused by :func:`decode_status`. MalformedMessage for a NaN that
+    JSON cannot carry (a ``delta_std`` of NaN: unknown)."""
     s = status
-    delta_hat = finite_list("delta_hat", s.delta_hat)
-    m = len(delta_hat)
-    flags = {name: _flags(name, getattr(s, name), m) for name in _FLAG_FIELDS}
-    if any(len(v) not in (0, m) for v in (s.esc_rpm, s.esc_current_a, s.esc_age_s, s.delta_std)):
-        raise MalformedMessage(f"esc telemetry: expected {m} entries per field")
     ages = {"setpoint": s.setpoint_age_s, "telemetry": s.telemetry_age_s}
     ages |= {f"esc{i + 1}": a for i, a in enumerate(s.esc_age_s)}
     body = {
         "mode": None if s.mode is None else s.mode.value,
-        "cycle": int(s.cycle),
-        "overruns": int(s.overruns),
-        "degraded": bool(s.degraded),
-        "estimation_frozen": bool(s.estimation_frozen),
-        "delta_hat": delta_hat,
-        "delta_std": finite_list("delta_std", s.delta_std) if s.delta_std else [],
-        "f_hat_N": finite_list("f_hat", s.f_hat, m),
-        "bf_hat": wrench_obj("bf_hat", s.bf_hat),
-        "u_N": finite_list("u", s.u, m),
-        "tau_demand": wrench_obj("tau_demand", s.tau_demand or (0.0,) * 3),
-        "tau_unallocated": wrench_obj("tau_unallocated", s.unallocated),
-        **flags,
-        "port_age_s": {k: (None if math.isinf(v) else float(v)) for k, v in ages.items()},
-        "stale": {"setpoint": bool(s.setpoint_stale), "telemetry": bool(s.telemetry_stale)},
-        "malformed": int(s.malformed),
-        "esc_rpm": [optional_float(float(v)) for v in s.esc_rpm],
-        "esc_current_A": [optional_float(float(v)) for v in s.esc_current_a],
+        "cycle": s.cycle,
+        "overruns": s.overruns,
+        "degraded": s.degraded,
+        "estimation_frozen": s.estimation_frozen,
+        "delta_hat": list(s.delta_hat),
+        "delta_std": list(s.delta_std),
+        "f_hat_N": list(s.f_hat),
+        "bf_hat": _wrench(s.bf_hat),
+        "u_N": list(s.u),
+        "tau_demand": _wrench(s.tau_demand),
+        "tau_unallocated": _wrench(s.unallocated),
+        **{name: list(getattr(s, name)) for name in _FLAG_FIELDS},
+        "port_age_s": {k: (None if math.isinf(v) else v) for k, v in ages.items()},
+        "stale": {"setpoint": s.setpoint_stale, "telemetry": s.telemetry_stale},
+        "malformed": s.malformed,
+        "esc_rpm": [optional_float(v) for v in s.esc_rpm],
+        "esc_current_A": [optional_float(v) for v in s.esc_current_a],
     }
     return dump(body)
+
+
+def _wrench(tau: tuple[float, ...]) -> dict[str, float]:
+    return dict(zip(WRENCH_FIELDS, tau or (0.0,) * 3, strict=True))
 
 
 _FLAG_FIELDS = ("saturated", "faulty", "esc_failed", "probing", "observable")
@@ -252,15 +255,9 @@ def _flag_lengths(name: str, m: int) -> tuple[int, ...]:
     return (m,) if name == "saturated" else (0, m)
 
 
-def _flags(name: str, value: tuple[bool, ...], m: int) -> list[bool]:
-    flags = [bool(f) for f in value]
-    if len(flags) not in _flag_lengths(name, m):
-        raise MalformedMessage(f"{name}: expected {m} flags, got {len(flags)}")
-    return flags
-
-
 def decode_status(payload: bytes | str) -> AllocatorStatus:
-    """The status of a payload; fields added after v1 are optional (their defaults)."""
+    """The status of a payload (built by :meth:`AllocatorStatus.checked`); fields added
+    after v1 are optional (their defaults)."""
     obj = load(payload)
     delta_hat = vector(obj, "delta_hat")
     m = delta_hat.shape[0]
@@ -272,12 +269,12 @@ def decode_status(payload: bytes | str) -> AllocatorStatus:
         if name == "saturated" or name in obj
     }
     esc: dict[str, Any] = {
-        attr: tuple(_optional_vector(obj, key, m))
+        attr: _optional_vector(obj, key, m)
         for attr, key in (("esc_rpm", "esc_rpm"), ("esc_current_a", "esc_current_A"))
         if key in obj
     }
     esc_ages = tuple(ages[f"esc{i + 1}"] for i in range(m) if f"esc{i + 1}" in ages)
-    return AllocatorStatus(
+    return AllocatorStatus.checked(
         mode=_mode(get_field(obj, "mode")),
         cycle=integer(obj, "cycle"),
         overruns=integer(obj, "overruns"),
@@ -285,13 +282,13 @@ def decode_status(payload: bytes | str) -> AllocatorStatus:
         estimation_frozen=boolean(obj, "estimation_frozen")
         if "estimation_frozen" in obj
         else False,
-        delta_hat=tuple(delta_hat.tolist()),
-        delta_std=tuple(vector(obj, "delta_std").tolist()) if obj.get("delta_std") else (),
-        f_hat=tuple(vector(obj, "f_hat_N", m).tolist()),
-        bf_hat=tuple(wrench(obj, "bf_hat").tolist()),
-        u=tuple(vector(obj, "u_N", m).tolist()),
-        tau_demand=tuple(wrench(obj, "tau_demand").tolist()) if "tau_demand" in obj else (),
-        unallocated=tuple(wrench(obj, "tau_unallocated").tolist()),
+        delta_hat=delta_hat,
+        delta_std=vector(obj, "delta_std") if obj.get("delta_std") else (),
+        f_hat=vector(obj, "f_hat_N", m),
+        bf_hat=wrench(obj, "bf_hat"),
+        u=vector(obj, "u_N", m),
+        tau_demand=wrench(obj, "tau_demand") if "tau_demand" in obj else (),
+        unallocated=wrench(obj, "tau_unallocated"),
         setpoint_stale=stale.get("setpoint", False),
         telemetry_stale=stale.get("telemetry", False),
         setpoint_age_s=ages.get("setpoint", math.inf),

@@ -10,7 +10,6 @@ from __future__ import annotations
 import logging
 
 from bridges.zenoh_io.link import ZenohAllocatorLink
-from ftcap_hil.core.messages import ThrusterCommand
 from ftcap_hil.core.status import AllocatorStatus, Severity
 
 log = logging.getLogger(__name__)
@@ -23,8 +22,8 @@ class ZenohStatusSink:
         self._link = link
 
     def publish(self, st: AllocatorStatus) -> None:
-        """Put the command and the status."""
-        self._link.publish_thruster_command(ThrusterCommand.checked(st.u))
+        """Put the command and the status (checked when built: ``AllocatorStatus.checked``)."""
+        self._link.publish_thruster_command(st.command)
         self._link.publish_status(st)
 
     def announce(self, text: str, severity: Severity) -> None:

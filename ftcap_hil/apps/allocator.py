@@ -13,6 +13,7 @@ import logging
 import time
 from pathlib import Path
 
+from ftcap_hil.apps.options import add_set_option
 from ftcap_hil.config.daemon import LoadedConfig, load_daemon_config
 from ftcap_hil.core.errors import ConfigError, FtcapError, PortError
 from ftcap_hil.runtime.allocator_ports import build_ports
@@ -25,13 +26,7 @@ log = logging.getLogger(__name__)
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, help="daemon TOML (default: shipped allocator.toml)")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="override a config value (repeatable)",
-    )
+    add_set_option(p, "config", "daemon.rate_hz=10")
     p.add_argument("--duration", type=float, help="stop after this many seconds")
     p.add_argument(
         "--command-log", type=Path, help="CSV of every command sent (monotonic ns, u_1..u_m in N)"

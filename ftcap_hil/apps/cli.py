@@ -1,7 +1,9 @@
 """``ftcap-hil`` command line: one subcommand per job, each in its own module.
 
-Subcommands are registered lazily (name -> module:function) so ``ftcap-hil simulate`` does
-not import the networking stacks and the daemon does not import matplotlib.
+The command name is read from the command line first and only that command's module is
+imported (:func:`build_parser`), so ``ftcap-hil simulate`` does not import the transport
+libraries and ``ftcap-hil allocator`` does not import matplotlib or Dask. ``ftcap-hil --help``
+lists every command from the table below without importing any of them.
 
 Errors: an :class:`~ftcap_hil.core.errors.FtcapError` that reaches the top is printed as
 ``ftcap-hil <command>: <message>`` on stderr and the command exits with its ``exit_code``
@@ -13,15 +15,15 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import logging
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
+from types import ModuleType
 
 from ftcap_hil.core.errors import ExitCode, FtcapError
 
 # name -> (module with add_arguments(parser) and run(args) -> exit code, help)
-_COMMANDS: dict[str, tuple[str, str]] = {
+COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("ftcap_hil.apps.simulate", "Offline closed-loop simulation of a scenario"),
     "campaign": ("ftcap_hil.apps.campaign", "Fault campaign: scenarios x seeds x modes on Dask"),
     "allocator": ("ftcap_hil.apps.allocator", "Run the allocator daemon"),
@@ -35,36 +37,42 @@ _COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
-def _available() -> dict[str, tuple[str, str]]:
-    return {
-        name: (mod, text)
-        for name, (mod, text) in _COMMANDS.items()
-        if importlib.util.find_spec(mod) is not None
-    }
+def command_of(argv: Sequence[str]) -> str | None:
+    """The command named on ``argv``: its first word that is not an option, if that is a
+    command of :data:`COMMANDS` (the top-level options, ``-v``/``-h``, take no value)."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in COMMANDS else None
+    return None
 
 
-def build_parser() -> tuple[
-    argparse.ArgumentParser, dict[str, Callable[[argparse.Namespace], int]]
-]:
+def command_module(name: str) -> ModuleType:
+    """Import the module of command ``name`` (a key of :data:`COMMANDS`)."""
+    return importlib.import_module(COMMANDS[name][0])
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser: every command listed with its help text, and only ``command``'s module
+    imported to add its arguments (the others parse no arguments of their own)."""
     parser = argparse.ArgumentParser(prog="ftcap-hil", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging")
     sub = parser.add_subparsers(dest="command", required=True)
-    runners: dict[str, Callable[[argparse.Namespace], int]] = {}
-    for name, (mod_name, text) in _available().items():
-        mod = importlib.import_module(mod_name)
-        p = sub.add_parser(name, help=text, description=mod.__doc__)
-        mod.add_arguments(p)
-        runners[name] = mod.run
-    return parser, runners
+    for name, (_, text) in COMMANDS.items():
+        if name == command:
+            mod = command_module(name)
+            mod.add_arguments(sub.add_parser(name, help=text, description=mod.__doc__))
+        else:
+            sub.add_parser(name, help=text)
+    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser, runners = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(command_of(argv)).parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2) if args.verbose else logging.INFO
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
     try:
-        return int(runners[args.command](args))
+        return int(command_module(args.command).run(args))
     except FtcapError as e:
         print(f"ftcap-hil {args.command}: {e}", file=sys.stderr)
         return int(e.exit_code)

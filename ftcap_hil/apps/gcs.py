@@ -10,13 +10,13 @@ latest ODOMETRY -> WRENCH_SETPOINT, the mission's fault changes -> MAV_CMD_INJEC
 end: zero wrench, faults cleared, then DIR/<mode>/timeseries.csv, DIR/results.json and the
 plots.
 
-Recorded per cycle: the true faults from the mission's schedule; delta_hat, f_hat and the
-DEGRADED flag from FTCAP_STATUS; u from ACTUATOR_OUTPUT_STATUS; v_ach = B (delta u + f) with
-the truth; bf_hat = B f_hat. innovation, window_len, probing and solve_us are not on the
-MAVLink status and are NaN. Exit codes (the shared table, ``ftcap_hil.core.errors``): 0 done,
-2 configuration, 3 vessel or allocator not answering, 4 link lost mid-flight, 5 an injection
-or a parameter refused or not acknowledged, 130 interrupted (SIGINT / SIGTERM; a flight
-stopped by the first signal is still written).
+Recorded per cycle: the true faults from the mission's schedule; delta_hat, f_hat,
+delta_std, the faulty flags and the DEGRADED flag from FTCAP_STATUS; u from
+ACTUATOR_OUTPUT_STATUS; v_ach = B (delta u + f) with the truth; bf_hat = B f_hat. The columns
+the MAVLink status does not carry (``report.flight.NOT_ON_MAVLINK``) are NaN. Exit codes (the
+shared table, ``ftcap_hil.core.errors``): 0 done, 2 configuration, 3 vessel or allocator not
+answering, 4 link lost mid-flight, 5 an injection or a parameter refused or not acknowledged,
+130 interrupted (SIGINT / SIGTERM; a flight stopped by the first signal is still written).
 """
 
 from __future__ import annotations
@@ -28,9 +28,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.apps.options import add_set_option
 from ftcap_hil.config.mission import load_mission, shipped_missions
 from ftcap_hil.core.errors import ConfigError, ExitCode, FtcapError
-from ftcap_hil.report.flight import FlightRecorder
+from ftcap_hil.report.flight import NOT_ON_MAVLINK, FlightRecorder
 from ftcap_hil.report.records import RunRecord
 from ftcap_hil.report.summary import flight_summary_lines as summary_lines
 from ftcap_hil.runtime.ground_station import (
@@ -53,13 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", type=Path, help="output folder (default: ftcap-runs/<mission>-<time>)")
     p.add_argument("--duration", type=float, help="mission seconds to fly (default: the mission's)")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="override a mission value, e.g. --set mission.mode=cap --set gcs.wrench_limit=[1,1,1]",
-    )
+    add_set_option(p, "mission", "mission.mode=cap")
     p.add_argument("--gcs-port", type=int, default=14550, help="this script's UDP inbox")
     p.add_argument("--allocator-port", type=int, default=14570, help="the allocator's UDP inbox")
     p.add_argument("--vessel-port", type=int, default=14560, help="the vessel's UDP inbox")
@@ -97,7 +92,7 @@ def meta(mission: Mission, flight: Flight, started: float) -> dict[str, Any]:
         "wrench_limited_cycles": flight.limited_cycles,
         "wall_time_s": time.monotonic() - started,
         "injections": [o.as_dict() for o in flight.outcomes],
-        "not_on_mavlink": ["innovation", "window_len", "probing", "solve_us"],
+        "not_on_mavlink": list(NOT_ON_MAVLINK),
     }
 
 

@@ -13,6 +13,7 @@ import contextlib
 import logging
 from pathlib import Path
 
+from ftcap_hil.apps.options import add_set_option
 from ftcap_hil.config.sim import load_config
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.runtime.vessel_process import Recorder, VesselPorts, VesselProcess
@@ -23,13 +24,7 @@ log = logging.getLogger(__name__)
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, help="vessel TOML (default: the shipped vessel.toml)")
     p.add_argument("--scenario", help="take the true faults from this scenario (file or name)")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="override a config value (TOML syntax), e.g. --set sim.silent_thrusters=[2]",
-    )
+    add_set_option(p, "config", "sim.silent_thrusters=[2]")
     p.add_argument("--duration", type=float, help="stop after this many seconds of sim time")
     p.add_argument("--record", type=Path, help="write the true state and faults to this CSV")
 

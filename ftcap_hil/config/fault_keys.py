@@ -5,7 +5,9 @@ forever), and ``delta`` / ``bias`` for all m thrusters (vectors) or for ``thrust
 (1-based) alone (scalars); its time profile is ``kind``: ``step`` (default), ``ramp``,
 ``intermittent``, ``stuck``, ``bias`` (:class:`~ftcap_hil.core.faults.EventKind`).
 ``ramp_s`` (s, > 0) belongs to a ramp, ``on_s`` and ``off_s`` (s, > 0) to an intermittent
-fault, which also needs ``until`` (see ``docs/scenarios.md``).
+fault, which also needs ``until`` (see ``docs/scenarios.md``). ``cause`` (optional) names
+what happened physically (:class:`~ftcap_hil.core.faults.Cause`: ``lost-blade``,
+``jammed``, ...): it decides what the thruster's drive and telemetry show.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from __future__ import annotations
 import math
 
 from ftcap_hil.config.tables import Table
-from ftcap_hil.core.faults import EventKind, FaultEvent, FaultSchedule
+from ftcap_hil.core.faults import Cause, EventKind, FaultEvent, FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 
 PROFILE_KEYS = {EventKind.RAMP: ("ramp_s",), EventKind.INTERMITTENT: ("on_s", "off_s")}
@@ -41,8 +43,12 @@ def fault_event(
             raise t.error(other, f"only for kind = {_owner(other)!r}")
     t.allow(*ALL_PROFILE_KEYS)
     times = {key: t.number(key) for key in own}
+    cause = t.enum("cause", Cause) if t.has("cause") else None
     try:
-        return FaultEvent(start, end, thruster, delta, bias, kind, **times)
+        return FaultEvent(
+            start, end, thruster, delta, bias, kind, times.get("ramp_s", 0.0),
+            times.get("on_s", 0.0), times.get("off_s", 0.0), cause,
+        )  # fmt: skip
     except ValueError as e:
         raise t.error(None, str(e)) from None
 

@@ -1,5 +1,5 @@
 """Scenarios on a realistic vessel preset: the truth is the preset, the allocator is told the
-preset with a stated mismatch (docs/scenarios.md, "Realistic scenarios").
+preset with a stated mismatch (docs/scenarios.md#realistic-scenarios).
 
 A realistic scenario is a scenario file whose ``[plant]`` names a preset
 (``ftcap_hil/data/vessels``)::

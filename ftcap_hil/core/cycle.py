@@ -2,9 +2,13 @@
 
 Call order per cycle t (Algorithm 1 of the paper):
 
-    sample = Observation(x(t-1), x(t), dt)           # by the caller, from telemetry
-    result = core.step(tau_d(t), sample)             # None when telemetry is stale
+    sample = Observation(x(t-1), x(t), dt_s)         # by the caller, from telemetry
+    evidence = Evidence.of(m, dead, stalled)         # by the caller, from the ESC telemetry
+    result = core.step(tau_d(t), sample, elapsed_s=elapsed_s, evidence=evidence)
     send(result.u)
+
+``sample`` is None when telemetry is stale; ``dt_s`` is the estimation interval on the
+vessel's clock, ``elapsed_s`` the time since the last cycle (for the rate limits).
 
 ``step`` assumes that the command acting over the last estimation interval is the one it
 returned last time (``u_sample`` overrides that: the daemon passes the time average of what
@@ -15,6 +19,7 @@ e.g. after the shell had to send zero).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -24,6 +29,13 @@ from ftcap_hil.core.allocation.excitation import Excitation, ExcitationConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.estimation.config import Estimate, EstimatorConfig, wrench_scale
 from ftcap_hil.core.estimation.decisions import Decision
+from ftcap_hil.core.estimation.shaft import (
+    DiagnosisConfig,
+    DriveModel,
+    DriveReport,
+    ShaftDiagnoser,
+    ShaftVerdict,
+)
 from ftcap_hil.core.estimation.stages import (
     EstimationStage,
     IdentityStage,
@@ -35,6 +47,7 @@ from ftcap_hil.core.estimation.stages import (
     WindowedStage,
 )
 from ftcap_hil.core.estimation.windowed import LiteralEstimator, WindowedEstimator
+from ftcap_hil.core.evidence import Evidence, Judged, apply_evidence
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.models.vessel3dof import PlantModel
@@ -63,6 +76,8 @@ class CoreConfig:
     # as its data sheet or a step test gives it; the estimator then compares the motion with
     # the lagged force, not with the command.
     thruster_lag_s: tuple[float, ...] = ()
+    # The drives' diagnosis (core/estimation/shaft.py), used when FtcapCore has drive models.
+    diagnosis: DiagnosisConfig = field(default_factory=DiagnosisConfig)
 
 
 class ThrustLag:
@@ -96,6 +111,7 @@ class CycleResult:
     probing: BoolArray  # (m,), a recovery probe is active
     estimation_frozen: bool
     decision: Decision | None = None  # the Kalman stage's decision (in use, observable, bias)
+    shaft: ShaftVerdict | None = None  # the drives' verdict (None: no drive models)
 
 
 def _finite(sample: Sample) -> bool:
@@ -109,7 +125,7 @@ class FtcapCore:
 
     ``B`` (k, m): effectiveness matrix, k = 3 for a surface vessel (tau = [X (N), Y (N),
     N (N*m)], body frame) or 1 for the linear plant; ``thrusters``: the m thrusters' limits;
-    ``dt_s``: the allocation period (s). The mode picks the estimation stage
+    ``period_s``: the allocation period (s). The mode picks the estimation stage
     (core/estimation/stages.py): ``FTCAP`` the Kalman estimator (or the windowed one with
     ``estimator.kind = "windowed"``), ``FTCAP_LITERAL`` the paper's literal one,
     ``ORACLE`` the truth handed in to :meth:`step`, ``CAP`` / ``NONE`` none (Delta_hat = I,
@@ -123,9 +139,10 @@ class FtcapCore:
         self,
         B: FloatArray,
         thrusters: ThrusterSet,
-        dt_s: float,
+        period_s: float,
         config: CoreConfig | None = None,
         plant: PlantModel | None = None,
+        drives: Sequence[DriveModel] | None = None,
     ):
         self.config = config or CoreConfig()
         self.B = np.array(B, dtype=np.float64)
@@ -133,7 +150,7 @@ class FtcapCore:
         if thrusters.m != self.m:
             raise ValueError(f"B has {self.m} columns but the vessel has {thrusters.m} thrusters")
         self.scale = wrench_scale(self.B, thrusters.u_min, thrusters.u_max)
-        self.allocator = Allocator(self.B, thrusters, dt_s, self.scale, self.config.allocator)
+        self.allocator = Allocator(self.B, thrusters, period_s, self.scale, self.config.allocator)
         self.u_range = np.maximum(np.abs(thrusters.u_min), np.abs(thrusters.u_max))
         self.excitation = Excitation(self.B, self.u_range, self.config.excitation)
         self.stage = self._make_stage(plant)
@@ -143,6 +160,13 @@ class FtcapCore:
         self._lag = ThrustLag(np.array(lag)) if lag and max(lag) > 0.0 else None
         self._unsized = isinstance(self.stage, KalmanStage) and self.config.excitation.info_rate > 0
         self.u_prev = np.zeros(self.m)
+        self.shaft: ShaftDiagnoser | None = None
+        if drives is not None and self.config.mode is Mode.FTCAP:
+            if len(drives) != self.m:
+                raise ValueError(f"drives: expected {self.m} drive models, got {len(drives)}")
+            self.shaft = ShaftDiagnoser(drives, self.config.diagnosis)
+        self._motion_only_s = np.zeros(self.m)  # a motion-only removal held this long
+        self._period_s = period_s
 
     def _size_excitation(self, estimation_dt_s: float) -> None:
         """Raise the dither and probe amplitudes to what the sensor's noise needs (see
@@ -183,9 +207,10 @@ class FtcapCore:
         w: Sample | None,
         truth: Truth | None = None,
         u_sample: FloatArray | None = None,
-        dt_s: float | None = None,
-        forced_dead: BoolArray | None = None,
-        stalled: BoolArray | None = None,
+        elapsed_s: float | None = None,
+        evidence: Evidence | None = None,
+        feedback: Sequence[DriveReport] = (),
+        t_s: float | None = None,
     ) -> CycleResult:
         """One cycle; returns the command to send and what led to it.
 
@@ -194,12 +219,14 @@ class FtcapCore:
         wrench (k,) already inverted from it), or None when there is no new sample
         (estimates held; the excitation does not advance). u_sample (m,): the command that
         was acting over that interval (its time average); defaults to the last command.
-        dt_s: time since the last cycle for the rate limits; defaults to the configured
+        elapsed_s: time since the last cycle, for the rate limits; defaults to the configured
         period. truth: the true faults, needed in ``ORACLE`` mode only (ValueError without).
-        forced_dead (m,): thrusters known failed from outside (a silent ESC): allocated
-        exactly 0, flagged faulty. stalled (m,): thrusters whose ESC reports no rpm under
-        command: allocated as dead (their recovery probes go on, so that a shaft turning
-        again is seen), flagged faulty, reported at delta_hat 0.
+        evidence: thrusters known dead or stalled from outside (the ESC telemetry; None:
+        nothing known), applied once to the stage's output (:func:`apply_evidence`).
+        feedback: the drive reports received since the last cycle and ``t_s`` the time now
+        (s, the reports' clock), for the drives' diagnosis (with drive models only): the
+        motion filter is then fed the thrust the measured speeds imply, and the verdict
+        joins the evidence (:meth:`Evidence.with_shaft`).
         """
         u_sample = self.u_prev if u_sample is None else u_sample
         if w is not None and not _finite(w):
@@ -208,56 +235,85 @@ class FtcapCore:
             self._size_excitation(w.dt_s)
         if self._lag is not None and isinstance(w, Observation):
             u_sample = self._lag.mean_force(u_sample, w.dt_s)
+        ev = Evidence.none(self.m) if evidence is None else evidence
+        verdict = None
+        if self.shaft is not None and t_s is not None:
+            verdict, u_sample = self._diagnose(feedback, t_s, w is not None, u_sample)
         out = self.stage.update(w, u_sample, truth)
-        delta, bf = out.delta_alloc, out.bf_alloc
-        dead_ext = np.zeros(self.m, dtype=bool) if forced_dead is None else forced_dead
-        forced = bool(dead_ext.any())
-        if forced:
-            delta = np.where(dead_ext, 0.0, delta)
-        stall = np.zeros(self.m, dtype=bool) if stalled is None else stalled & ~dead_ext
-        if stall.any():
-            delta = np.where(stall, 0.0, delta)
-        dead = delta < self.config.allocator.dead_threshold
-        u_pref, probe = None, None
-        if self.config.mode is Mode.FTCAP:
-            exc = self.excitation(delta, dead, advance=w is not None)
-            u_pref, probe = exc.u_pref, exc.probe_limit
-            if forced:
-                # Known failed from outside (silent ESC): no probing, no dither, exactly 0.
-                u_pref = np.where(dead_ext, 0.0, u_pref)
-                probe = np.where(dead_ext, 0.0, probe)
-        alloc = self.allocator.allocate(tau_d, delta, bf, self.u_prev, u_pref, probe, dt_s)
-        alloc = self._unremove_if_short(alloc, out, delta, dead_ext, tau_d, bf, u_pref, probe, dt_s)
+        if verdict is not None:
+            ev = ev.with_shaft(verdict, self._motion_confirmed(out, verdict, elapsed_s))
+        seen = apply_evidence(ev, out, self.config.allocator.dead_threshold, self.B)
+        u_pref, probe = self._excite(seen, advance=w is not None)
+
+        def allocate(delta: FloatArray) -> Allocation:
+            return self.allocator.allocate(
+                tau_d, delta, seen.bf, self.u_prev, u_pref, probe, elapsed_s
+            )
+
+        alloc = self._unremove_if_short(allocate(seen.delta), seen, allocate)
         self.u_prev = alloc.u
-        est = out.estimate
-        if forced or stall.any():
-            est = replace(est, delta_hat=np.where(dead_ext | stall, 0.0, est.delta_hat))
+        if self.shaft is not None and t_s is not None:
+            self.shaft.command(t_s, alloc.u)
         return CycleResult(
             alloc.u,
-            est,
+            seen.estimate,
             alloc,
-            out.faulty | dead_ext | stall,
+            seen.faulty,
             np.zeros(self.m, dtype=bool) if probe is None else probe > 0,
             estimation_frozen=self.config.mode.estimates and w is None,
             decision=out.decision,
+            shaft=verdict,
         )
 
+    def _diagnose(
+        self, feedback: Sequence[DriveReport], t_s: float, sampled: bool, u_sample: FloatArray
+    ) -> tuple[ShaftVerdict, FloatArray]:
+        """The drives' verdict at ``t_s`` after ``feedback``; on a new estimation sample the
+        motion filter's input: the thrust the measured speeds implied over the interval
+        where a drive reported, the (lagged) command elsewhere."""
+        assert self.shaft is not None
+        for report in feedback:
+            self.shaft.report(report)
+        verdict = self.shaft.verdict(t_s)
+        if sampled:
+            implied = self.shaft.take_thrust_means()
+            implied = implied * verdict.load_factor
+            u_sample = np.where(np.isfinite(implied) & verdict.fresh, implied, u_sample)
+        return verdict, u_sample
+
+    def _motion_confirmed(
+        self, out: StageOutput, verdict: ShaftVerdict, elapsed_s: float | None
+    ) -> BoolArray:
+        """Thrusters the motion alone has kept removed (drive fresh and clean) for
+        ``diagnosis.motion_removal_s``: only then is that removal acted upon."""
+        suspect = verdict.fresh & ~verdict.actionable & (out.delta_alloc < 1.0)
+        dt = self._period_s if elapsed_s is None else elapsed_s
+        self._motion_only_s = np.where(suspect, self._motion_only_s + dt, 0.0)
+        confirmed: BoolArray = self._motion_only_s >= self.config.diagnosis.motion_removal_s
+        return confirmed
+
+    def _excite(self, seen: Judged, advance: bool) -> tuple[FloatArray | None, FloatArray | None]:
+        """The excitation's preferred command and probe limits (``FTCAP`` mode only; None
+        otherwise); a quiet thruster (known dead) gets neither: exactly 0."""
+        if self.config.mode is not Mode.FTCAP:
+            return None, None
+        dead = seen.delta < self.config.allocator.dead_threshold
+        exc = self.excitation(seen.delta, dead, advance=advance, still=seen.no_dither)
+        u_pref, probe = exc.u_pref, exc.probe_limit
+        if seen.quiet.any():
+            u_pref = np.where(seen.quiet, 0.0, u_pref)
+            probe = np.where(seen.quiet, 0.0, probe)
+        return u_pref, probe
+
     def _unremove_if_short(
-        self,
-        alloc: Allocation,
-        out: StageOutput,
-        delta: FloatArray,
-        dead_ext: BoolArray,
-        tau_d: FloatArray,
-        bf: FloatArray,
-        u_pref: FloatArray | None,
-        probe: FloatArray | None,
-        dt_s: float | None,
+        self, alloc: Allocation, seen: Judged, allocate: Callable[[FloatArray], Allocation]
     ) -> Allocation:
         """Removal is an economy, never a loss of authority: when the allocation without the
         removed thrusters leaves part of the demand unmet (more than ``SHORT_FRACTION`` of the
-        wrench range on an axis), allocate again with them at their estimated effectiveness
-        and keep whichever plan meets more of the demand (scaled norm of the shortfall).
+        wrench range on an axis), allocate again (``allocate``: the cycle's allocation for an
+        effectiveness vector) with the restorable ones (:class:`Judged`) at their estimated
+        effectiveness and keep whichever plan meets more of the demand (scaled norm of the
+        shortfall).
 
         Why: a removed thruster is one whose estimate says it gives a third of its thrust or
         less, and on two parallel thrusters one that is stuck on can make the healthy one
@@ -266,18 +322,13 @@ class FtcapCore:
         starboard one removed and the boat pushed 46 m off station where CAP held 0.9 m.
         Commanded at its estimate it still pushes, and its data start flowing again.
         """
-        dec = out.decision
-        if dec is None or not dec.removed.any():
+        back = seen.restorable
+        if not back.any():
             return alloc
         short = np.abs(alloc.unallocated) / self.scale
         if short.max() <= SHORT_FRACTION:
             return alloc
-        usable = out.estimate.delta_hat >= self.config.allocator.dead_threshold
-        back = dec.removed & ~dead_ext & usable
-        if not back.any():
-            return alloc
-        restored = np.where(back, out.estimate.delta_hat, delta)
-        retry = self.allocator.allocate(tau_d, restored, bf, self.u_prev, u_pref, probe, dt_s)
+        retry = allocate(np.where(back, seen.restore_at, seen.delta))
         if np.linalg.norm(retry.unallocated / self.scale) < np.linalg.norm(short):
             return retry
         return alloc

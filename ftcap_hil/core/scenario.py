@@ -13,6 +13,7 @@ import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
+from ftcap_hil.core.estimation.shaft import DriveModel
 from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.controllers import PoseController, StateFeedback
@@ -63,6 +64,9 @@ class Scenario:
     # Estimation samples this far apart (s), a multiple of dt_s (None: every step): over
     # several wave periods the wave-frequency motion averages out of the evidence.
     estimation_period_s: float | None = None
+    # The drives as their data sheets give them (core/estimation/shaft.py), one per thruster:
+    # the allocator then judges each thruster by its own telemetry (None: motion only).
+    drives: tuple[DriveModel, ...] | None = None
 
     @property
     def steps(self) -> int:

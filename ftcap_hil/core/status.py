@@ -6,6 +6,9 @@
 decodes it as its default (``mode`` None, ages +inf, empty per-thruster tuples), so every
 consumer reads the same names whatever the wire was. SI units, body frame; per-thruster
 tuples have one entry per thruster in vessel-file order.
+
+Build a status with :meth:`AllocatorStatus.checked` (the daemon from its cycle, every
+decoder from its wire): it is validated there, once, and every encoder and reader trusts it.
 """
 
 from __future__ import annotations
@@ -13,6 +16,12 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.messages import ThrusterCommand
 
 
 class Mode(enum.Enum):
@@ -79,6 +88,52 @@ class AllocatorStatus:
     esc_current_a: tuple[float, ...] = ()
     esc_age_s: tuple[float, ...] = ()
 
+    @classmethod
+    def checked(cls, **values: Any) -> AllocatorStatus:
+        """The status of ``values`` (fields by name; vectors as any sequence or array),
+        normalised to tuples of float / bool, or MalformedMessage naming the first field
+        that breaks the rules (TypeError for a name that is not a field):
+
+        * every per-thruster field has m = len(delta_hat) entries, or none (not carried);
+        * every wrench (``tau_demand``, ``unallocated``, ``bf_hat``) has 3 entries, or none;
+        * ``delta_hat``, ``f_hat``, ``u`` and the wrenches are finite (``delta_std``, the
+          ESC telemetry and the ages may hold NaN / +inf as the class docstring says);
+        * ``mode`` is a :class:`Mode` or None.
+        """
+        st = cls(**values)
+        norm: dict[str, Any] = {n: _floats(n, getattr(st, n)) for n in _FLOATS}
+        norm |= {n: tuple(bool(v) for v in getattr(st, n)) for n in _BOOLS}
+        m = len(norm["delta_hat"])
+        for name in (*_FLOATS, *_BOOLS):
+            want = (0, 3) if name in _WRENCHES else (0, m)
+            if len(norm[name]) not in want:
+                raise MalformedMessage(
+                    f"status {name}: expected {' or '.join(map(str, want))} entries, "
+                    f"got {len(norm[name])}"
+                )
+        for name in _FINITE:
+            if not all(map(math.isfinite, norm[name])):
+                raise MalformedMessage(f"status {name}: non-finite value in {norm[name]}")
+        if st.mode is not None and not isinstance(st.mode, Mode):
+            raise MalformedMessage(f"status mode: {st.mode!r:.40} is not a Mode")
+        norm |= {n: int(getattr(st, n)) for n in ("cycle", "overruns", "malformed")}
+        norm |= {n: bool(getattr(st, n)) for n in _FLAGS}
+        norm |= {n: float(getattr(st, n)) for n in ("setpoint_age_s", "telemetry_age_s")}
+        return cls(mode=st.mode, **norm)
+
+    @property
+    def command(self) -> ThrusterCommand:
+        """The last command ``u`` (m,) in N as a message."""
+        return ThrusterCommand(np.array(self.u, dtype=np.float64))
+
+    @property
+    def flagged(self) -> tuple[bool, ...]:
+        """Per thruster: flagged by the estimator or failed by its ESC watchdog (empty when
+        the status carries neither)."""
+        faulty = self.faulty or (False,) * len(self.esc_failed)
+        failed = self.esc_failed or (False,) * len(faulty)
+        return tuple(a or b for a, b in zip(faulty, failed, strict=True))
+
     @property
     def m(self) -> int:
         """Number of thrusters the status describes."""
@@ -99,3 +154,23 @@ class AllocatorStatus:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["mode"] = None if self.mode is None else self.mode.value
         return out
+
+
+_WRENCHES = ("tau_demand", "unallocated", "bf_hat")
+_FINITE = ("delta_hat", "f_hat", "u", *_WRENCHES)
+_FLOATS = (*_FINITE, "delta_std", "esc_rpm", "esc_current_a", "esc_age_s")
+_BOOLS = ("observable", "saturated", "faulty", "esc_failed", "probing")
+_FLAGS = ("degraded", "setpoint_stale", "telemetry_stale", "estimation_frozen")
+
+
+def _floats(name: str, value: object) -> tuple[float, ...]:
+    """``value`` (a sequence or a 1-D array of numbers) as a tuple of floats."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise MalformedMessage(f"status {name}: not a numeric vector: {e}") from e
+    if arr.ndim != 1:
+        raise MalformedMessage(f"status {name}: expected a vector, got shape {arr.shape}")
+    # Every NaN as the one ``math.nan``: tuples compare items by identity first, so two
+    # statuses with the same unknowns (an ESC never heard) compare equal.
+    return tuple(math.nan if v != v else v for v in arr.tolist())

@@ -1,6 +1,8 @@
 """Run records, ``timeseries.csv`` and ``results.json`` (schema in docs/results.md).
 
-Shared by the offline simulator and the ground-station script so both write the same files.
+The columns are defined once, by name (:func:`column_groups`), and filled by name
+(:class:`Rows`) by both recorders, the offline simulator's :class:`Recorder` and the ground
+station's ``report.flight.FlightRecorder``, so both write the same files.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CycleResult
 from ftcap_hil.core.faults import Truth
-from ftcap_hil.core.messages import FloatArray
+from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.models.plants import LinearPlant, wrap_angle
 from ftcap_hil.core.scenario import Scenario
 
@@ -37,36 +39,87 @@ class RunRecord:
         return self.columns["t"]
 
 
-def column_names(sc: Scenario) -> list[str]:
+THRUSTER_GROUPS = ("u", "tau", "delta", "f", "delta_hat", "f_hat")
+SCALARS = ("innovation", "window_len", "fallback", "probing", "solve_us")
+DECISION_GROUPS = ("faulty", "dead", "delta_std", "observable")
+
+
+def _numbered(prefix: str, n: int) -> list[str]:
+    return [f"{prefix}_{i}" for i in range(1, n + 1)]
+
+
+def column_groups(sc: Scenario) -> dict[str, list[str]]:
+    """The ``timeseries.csv`` columns of a scenario by group, in file order (docs/results.md):
+    ``t``; ``state`` (``x``, or ``north,east,psi,u,v,r``); ``ref``; ``v_dem_j``, ``v_ach_j``
+    (j = 1..k); per thruster (i = 1..m) ``u_i``, ``tau_i``, ``delta_i``, ``f_i``,
+    ``delta_hat_i``, ``f_hat_i``; ``bf_hat_j``; the scalars ``innovation``, ``window_len``,
+    ``fallback``, ``probing``, ``solve_us``; per thruster ``faulty_i`` (the core's fault
+    flag, CoreConfig.fault_threshold / fault_clear), ``dead_i`` (taken out of the
+    allocation: the effectiveness the allocator used was below allocator.dead_threshold,
+    ``Allocation.dead``), ``delta_std_i`` (standard deviation of delta_hat_i) and
+    ``observable_i`` (the recent data determine delta_i); flags are 0 or 1."""
     m, k = sc.thrusters.m, sc.B.shape[0]
-    state = list(sc.plant.state_labels)
-    refs = ["ref_x"] if isinstance(sc.plant, LinearPlant) else ["ref_north", "ref_east", "ref_psi"]
-    names = ["t", *state, *refs]
-    names += [f"v_dem_{j}" for j in range(1, k + 1)] + [f"v_ach_{j}" for j in range(1, k + 1)]
-    for prefix in ("u", "tau", "delta", "f", "delta_hat", "f_hat"):
-        names += [f"{prefix}_{i}" for i in range(1, m + 1)]
-    names += [f"bf_hat_{j}" for j in range(1, k + 1)]
-    names += ["innovation", "window_len", "fallback", "probing", "solve_us"]
-    return names
+    linear = isinstance(sc.plant, LinearPlant)
+    groups = {
+        "t": ["t"],
+        "state": list(sc.plant.state_labels),
+        "ref": ["ref_x"] if linear else ["ref_north", "ref_east", "ref_psi"],
+        "v_dem": _numbered("v_dem", k),
+        "v_ach": _numbered("v_ach", k),
+    }
+    groups |= {g: _numbered(g, m) for g in THRUSTER_GROUPS}
+    groups |= {"bf_hat": _numbered("bf_hat", k)}
+    groups |= {c: [c] for c in SCALARS}
+    groups |= {g: _numbered(g, m) for g in DECISION_GROUPS}
+    return groups
 
 
-def flag_names(sc: Scenario) -> list[str]:
-    """Per-thruster decision columns the offline recorder appends after ``column_names``:
-    ``faulty_i`` (the core's fault flag, CoreConfig.fault_threshold / fault_clear) and
-    ``dead_i`` (taken out of the allocation: the effectiveness the allocator used was below
-    allocator.dead_threshold, ``Allocation.dead``); 0 or 1."""
-    m = sc.thrusters.m
-    return [f"faulty_{i}" for i in range(1, m + 1)] + [f"dead_{i}" for i in range(1, m + 1)]
+def column_names(sc: Scenario) -> list[str]:
+    """Every ``timeseries.csv`` column of a scenario, in file order (:func:`column_groups`)."""
+    return [name for names in column_groups(sc).values() for name in names]
+
+
+class Rows:
+    """A record's rows, each filled by group name (:func:`column_groups`): a group not
+    given is NaN (not measured)."""
+
+    def __init__(self, sc: Scenario) -> None:
+        self.names = column_names(sc)
+        self._slices: dict[str, slice] = {}
+        at = 0
+        for group, names in column_groups(sc).items():
+            self._slices[group] = slice(at, at + len(names))
+            at += len(names)
+        self.rows: list[FloatArray] = []
+
+    def add(self, **groups: object) -> None:
+        """Append a row; each value is a scalar (a one-column group) or a vector of its
+        group's width. KeyError for an unknown group, ValueError for a wrong width."""
+        row = np.full(len(self.names), np.nan)
+        for group, value in groups.items():
+            where = self._slices[group]
+            arr = np.asarray(value, dtype=np.float64)
+            width = where.stop - where.start
+            if arr.shape != (width,) and not (arr.ndim == 0 and width == 1):
+                raise ValueError(f"{group}: expected {width} values, got shape {arr.shape}")
+            row[where] = arr
+        self.rows.append(row)
+
+    def columns(self) -> dict[str, FloatArray]:
+        """The rows as columns by name."""
+        data = np.vstack(self.rows) if self.rows else np.zeros((0, len(self.names)))
+        return {n: data[:, i] for i, n in enumerate(self.names)}
 
 
 class Recorder:
-    """Collects one row per cycle, in the order of ``column_names`` then ``flag_names``."""
+    """The offline simulator's record: one row per cycle, every column filled but
+    ``delta_std`` and ``observable`` where the estimator gives none (NaN)."""
 
     def __init__(self, sc: Scenario, mode: str) -> None:
         self.sc = sc
         self.mode = mode
-        self.names = column_names(sc) + flag_names(sc)
-        self.rows: list[FloatArray] = []
+        self._rows = Rows(sc)
+        self.names = self._rows.names
 
     def add(
         self,
@@ -81,38 +134,41 @@ class Recorder:
         solve_s: float,
     ) -> None:
         est = res.estimate
-        row = np.concatenate(
-            [
-                [t],
-                x,
-                ref,
-                v_dem,
-                v_ach,
-                res.u,
-                produced,
-                truth.delta,
-                truth.f,
-                est.delta_hat,
-                est.f_hat,
-                est.bf_hat,
-                [
-                    est.innovation,
-                    est.window_len,
-                    res.allocation.status is not AllocationStatus.OK,
-                    bool(np.any(res.probing)),
-                    solve_s * 1e6,
-                ],
-                res.faulty,
-                res.allocation.dead,
-            ]
+        self._rows.add(
+            t=t,
+            state=x,
+            ref=ref,
+            v_dem=v_dem,
+            v_ach=v_ach,
+            u=res.u,
+            tau=produced,
+            delta=truth.delta,
+            f=truth.f,
+            delta_hat=est.delta_hat,
+            f_hat=est.f_hat,
+            bf_hat=est.bf_hat,
+            innovation=est.innovation,
+            window_len=est.window_len,
+            fallback=res.allocation.status is not AllocationStatus.OK,
+            probing=bool(np.any(res.probing)),
+            solve_us=solve_s * 1e6,
+            faulty=res.faulty,
+            dead=res.allocation.dead,
+            **_uncertainty(res),
         )
-        self.rows.append(row)
 
     def finish(self, **meta: Any) -> RunRecord:
-        data = np.vstack(self.rows) if self.rows else np.zeros((0, len(self.names)))
-        return RunRecord(
-            self.sc, self.mode, {n: data[:, i] for i, n in enumerate(self.names)}, meta
-        )
+        return RunRecord(self.sc, self.mode, self._rows.columns(), meta)
+
+
+def _uncertainty(res: CycleResult) -> dict[str, FloatArray | BoolArray]:
+    """delta_std and observable when the estimator gives them (the Kalman stage)."""
+    out: dict[str, FloatArray | BoolArray] = {}
+    if res.estimate.delta_std is not None:
+        out["delta_std"] = res.estimate.delta_std
+    if res.decision is not None:
+        out["observable"] = res.decision.observable
+    return out
 
 
 def write_csv(rec: RunRecord, path: Path) -> None:

@@ -32,6 +32,8 @@ import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
+from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
 from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
@@ -231,7 +233,7 @@ class AllocatorDaemon:
         is stale (zero thrust)."""
         started = self.loop.clock()
         self.cycles += 1
-        dt = self._dt_s(now)
+        elapsed_s = self._elapsed_s(now)
         setpoint, sp_stamp = _latest(self.ports.setpoints)
         odom, tel_stamp = self._telemetry()
         fresh = self._freshness(now, sp_stamp, tel_stamp)
@@ -256,9 +258,8 @@ class AllocatorDaemon:
                 setpoint.tau,
                 obs,
                 u_sample=u_mean,
-                dt_s=dt,
-                forced_dead=fresh.esc_failed,
-                stalled=self._stalled(now, fresh),
+                elapsed_s=elapsed_s,
+                evidence=self._evidence(now, fresh),
             )
             self._send(result.u, now, started)
             if sp_stamp != self._last_sp_stamp:
@@ -271,6 +272,11 @@ class AllocatorDaemon:
             self._last_status_ns = now
             self._publish(now, fresh)
         return result
+
+    def _evidence(self, now: int, fresh: Freshness) -> Evidence:
+        """What the ESC telemetry says of the thrusters this cycle: dead (silent: the
+        watchdog's ``esc_failed``) and stalled (:meth:`_stalled`)."""
+        return Evidence.of(self.core.m, fresh.esc_failed, self._stalled(now, fresh))
 
     def _stalled(self, now: int, fresh: Freshness) -> BoolArray | None:
         """Thrusters whose ESC reports no rpm under the command they have, on the ESC ages
@@ -302,7 +308,7 @@ class AllocatorDaemon:
         slot = newest_odometry([box.latest() for box in self.ports.telemetry], window_ns)
         return (None, -1) if slot is None else (slot.value, slot.stamp_ns)
 
-    def _dt_s(self, now: int) -> float | None:
+    def _elapsed_s(self, now: int) -> float | None:
         """Seconds since the last cycle, clamped to ``dt_clamp`` periods (None: first)."""
         last, self._last_cycle_ns = self._last_cycle_ns, now
         if last is None:
@@ -372,7 +378,12 @@ class AllocatorDaemon:
         )
 
     def _publish(self, now: int, fresh: Freshness) -> None:
-        st = self.status(now, fresh)
+        try:
+            st = self.status(now, fresh)
+        except MalformedMessage as e:  # a non-finite estimate: nothing to publish, go on
+            self.transitions.update("status", True, f"status not built: {e}", None, Severity.ERROR)
+            return
+        self.transitions.update("status", False, "")
         self.last_status = st
         for sink in self.ports.status:
             name = type(sink).__name__

@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 
 from ftcap_hil.core.cycle import FtcapCore
+from ftcap_hil.core.estimation.shaft import DriveReport
 from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.messages import FloatArray
@@ -65,7 +66,8 @@ def run_mode(
     vessel (the paper's 12 s onset falls 0.45 T_s into a step); False applies faults per
     step (zero-order hold), which hides the sample that straddles an onset."""
     sc = sc.with_mode(mode)
-    core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, told_sensor_noise(sc).core, sc.plant)
+    drives = sc.drives if sc.truth is not None else None
+    core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, told_sensor_noise(sc).core, sc.plant, drives)
     faults = FaultSchedule(sc.thrusters.m) if mode is Mode.NONE else sc.faults
     if sc.truth is not None:
         return _run_truth(sc, mode, core, faults, progress)
@@ -121,6 +123,7 @@ def _run_truth(
     latest = model.start()[-1]
     used: Measurement | None = None
     u_sum, u_time = np.zeros(sc.thrusters.m), 0.0
+    reports: list[DriveReport] = []
     for k in _steps(sc, mode, progress):
         t = k * sc.dt_s
         x_meas = np.concatenate([latest.eta, latest.nu])
@@ -136,9 +139,9 @@ def _run_truth(
         truth = faults.at(t).effective(model.shaft_thrust)
         x_true = model.x
         t0 = time.perf_counter()
-        res = core.step(tau_d, w, truth, u_sample=u_mean)
+        res = core.step(tau_d, w, truth, u_sample=u_mean, feedback=reports, t_s=t)
         elapsed = time.perf_counter() - t0
-        produced, tau, delivered = _advance(model, faults, res.u, t, sc.dt_s)
+        produced, tau, delivered, reports = _advance(model, faults, res.u, t, sc.dt_s)
         u_sum, u_time = u_sum + res.u * sc.dt_s, u_time + sc.dt_s
         latest = delivered[-1] if delivered else latest
         rec.add(t, x_true, ref, tau_d, tau, res, produced, truth, elapsed)
@@ -147,19 +150,24 @@ def _run_truth(
 
 def _advance(
     model: TruthModel, faults: FaultSchedule, u: FloatArray, t: float, dt: float
-) -> tuple[FloatArray, FloatArray, list[Measurement]]:
+) -> tuple[FloatArray, FloatArray, list[Measurement], list[DriveReport]]:
     """One control period of the truth, split at the fault changes inside it; the means of
-    the produced forces and of the wrench over the period, and the odometry delivered."""
+    the produced forces and of the wrench over the period, the odometry and the drive
+    reports delivered (the latter stamped when delivered: all the allocator knows)."""
     cuts = [c for c in faults.change_times() if t < c < t + dt]
     edges = [t, *cuts, t + dt]
     produced, tau = np.zeros(u.shape), np.zeros(3)
     delivered: list[Measurement] = []
+    reports: list[DriveReport] = []
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         step = model.step(u, faults.at(a), b - a)
         produced += step.produced * ((b - a) / dt)
         tau += step.tau * ((b - a) / dt)
         delivered += step.measurements
-    return produced, tau, delivered
+        reports += [
+            DriveReport(s.t_delivered_s, s.index, s.speed, s.current_a) for s in step.feedback
+        ]
+    return produced, tau, delivered, reports
 
 
 def run_modes(

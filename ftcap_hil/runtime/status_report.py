@@ -15,6 +15,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CycleResult
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray
@@ -54,17 +56,17 @@ class LoopCounts:
     malformed: int
 
 
-def _flags(a: BoolArray | None, m: int) -> tuple[bool, ...]:
-    return (False,) * m if a is None else tuple(bool(v) for v in a)
+def _flags(a: BoolArray | None, m: int) -> BoolArray:
+    return np.zeros(m, dtype=bool) if a is None else a
 
 
 def _esc_fields(esc: EscReport | None) -> dict[str, Any]:
     if esc is None:
         return {}
     return {
-        "esc_rpm": tuple(math.nan if e is None else float(e.rpm) for e in esc.latest),
-        "esc_current_a": tuple(math.nan if e is None else float(e.current_a) for e in esc.latest),
-        "esc_age_s": tuple(float(a) for a in esc.ages_s),
+        "esc_rpm": [math.nan if e is None else e.rpm for e in esc.latest],
+        "esc_current_a": [math.nan if e is None else e.current_a for e in esc.latest],
+        "esc_age_s": esc.ages_s,
     }
 
 
@@ -74,9 +76,9 @@ def _uncertainty_fields(last: CycleResult | None) -> dict[str, Any]:
         return {}
     fields: dict[str, Any] = {}
     if last.estimate.delta_std is not None:
-        fields["delta_std"] = tuple(float(v) for v in last.estimate.delta_std)
+        fields["delta_std"] = last.estimate.delta_std
     if last.decision is not None:
-        fields["observable"] = tuple(bool(v) for v in last.decision.observable)
+        fields["observable"] = last.decision.observable
     return fields
 
 
@@ -91,12 +93,14 @@ def assemble_status(
     degraded: bool,
     esc: EscReport | None = None,
 ) -> AllocatorStatus:
-    """The status after a cycle. ``last`` is the latest cycle that allocated (None before
-    the first: no estimate yet, delta_hat 1, nothing saturated); ``u`` (m,) the command on
-    the thrusters (N), ``tau_demand`` (k,) the demand of this cycle (zero while stale)."""
+    """The status after a cycle (:meth:`AllocatorStatus.checked`: MalformedMessage if the
+    cycle left something it refuses, a non-finite estimate). ``last`` is the latest cycle
+    that allocated (None before the first: no estimate yet, delta_hat 1, nothing
+    saturated); ``u`` (m,) the command on the thrusters (N), ``tau_demand`` (k,) the demand
+    of this cycle (zero while stale)."""
     m, k = u.size, tau_demand.size
     est = last.estimate if last is not None else None
-    return AllocatorStatus(
+    return AllocatorStatus.checked(
         mode=mode,
         cycle=counts.cycle,
         overruns=counts.overruns,
@@ -104,12 +108,12 @@ def assemble_status(
         setpoint_stale=fresh.setpoint_stale,
         telemetry_stale=fresh.telemetry_stale,
         estimation_frozen=fresh.telemetry_stale and mode.estimates,
-        delta_hat=tuple(est.delta_hat.tolist()) if est else (1.0,) * m,
-        f_hat=tuple(est.f_hat.tolist()) if est else (0.0,) * m,
-        bf_hat=tuple(est.bf_hat.tolist()) if est else (0.0,) * k,
-        u=tuple(u.tolist()),
-        tau_demand=tuple(tau_demand.tolist()),
-        unallocated=tuple(last.allocation.unallocated.tolist()) if last else (0.0,) * k,
+        delta_hat=est.delta_hat if est else np.ones(m),
+        f_hat=est.f_hat if est else np.zeros(m),
+        bf_hat=est.bf_hat if est else np.zeros(k),
+        u=u,
+        tau_demand=tau_demand,
+        unallocated=last.allocation.unallocated if last else np.zeros(k),
         saturated=_flags(last.allocation.saturated if last else None, m),
         faulty=_flags(last.faulty if last else None, m),
         esc_failed=_flags(fresh.esc_failed, m),

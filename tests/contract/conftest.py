@@ -6,7 +6,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.contract.mavlink_support import mavlink_threads, wait_until
+from tests.support.mavlink_peers import mavlink_threads, wait_until
 
 
 @pytest.fixture

@@ -45,7 +45,7 @@ from bridges.can_io.hub import CanHub
 from bridges.mavlink.gcs import wait_until
 from ftcap_hil.core.messages import EscStatus, ThrusterCommand
 from ftcap_hil.ports.mailbox import Mailbox
-from tests.fuzz.payloads import can_frames
+from tests.support.payloads import can_frames
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -20,7 +20,6 @@ from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
 from ftcap_hil.core.errors import ExitCode
 from ftcap_hil.core.faults import Injection
 from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry
-from ftcap_hil.core.models.controllers import PoseController
 from ftcap_hil.core.status import AllocatorStatus, Mode
 from ftcap_hil.runtime.ground_station import (
     FlightPlan,
@@ -31,7 +30,7 @@ from ftcap_hil.runtime.ground_station import (
     Refused,
     WrenchLaw,
 )
-from tests.contract.mavlink_support import free_udp_ports, wait_until
+from tests.support.mavlink_peers import free_udp_ports, wait_until
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.usefixtures("no_leaked_threads")]
 
@@ -132,7 +131,7 @@ def test_a_flight_sends_eq24_injects_and_keeps_what_it_heard(rig) -> None:
     assert 9 <= flight.cycles + flight.overruns <= 11, (flight.cycles, flight.overruns)
     assert flight.sent == flight.cycles and flight.send_failures == 0
     sent = peers.allocator.setpoint.latest()
-    want = PoseController()(np.concatenate(POSE), np.zeros(3))
+    want = [-0.26313548, 0.11761354, -0.04725]  # eq. (24), kp 0.75, k_eta 0.63, at POSE
     assert sent is not None
     np.testing.assert_allclose(sent.value.tau, want, rtol=1e-5)  # float32 on the wire
     assert flight.max_position_error_m == pytest.approx(math.hypot(0.5, 0.2), rel=1e-5)

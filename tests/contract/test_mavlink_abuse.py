@@ -1,6 +1,6 @@
 """Abuse and fuzz of a running MavlinkAllocatorLink on loopback (bounded: well under a minute).
 
-The sender is a process of its own (``python -m tests.contract.mavlink_abuse``), as an
+The sender is a process of its own (``python -m tests.support.mavlink_abuse``), as an
 attacker's would be; the ground station is bare pymavlink on the link's configured peer.
 Outcomes asserted: the link never dies and no handler fails; nothing from a stranger is
 obeyed; every datagram is accounted for (kernel drops + what the port saw, and every one the
@@ -21,8 +21,8 @@ from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.config import ALLOCATOR_IDS, MavlinkEndpoint
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.peers import TrafficLimits
-from tests.contract.mavlink_abuse import Pinger, flood, rss_bytes, udp_drops
-from tests.contract.mavlink_support import (
+from tests.support.mavlink_abuse import Pinger, flood, rss_bytes, udp_drops
+from tests.support.mavlink_peers import (
     RawPeer,
     free_udp_ports,
     wait_until,
@@ -52,7 +52,7 @@ def rig() -> Iterator[tuple[MavlinkAllocatorLink, RawPeer, int]]:
 def _flood_process(
     port: int, rate: float, seconds: float, kind: str, *extra: str
 ) -> subprocess.Popen[str]:
-    cmd = [sys.executable, "-m", "tests.contract.mavlink_abuse", str(port), str(rate)]
+    cmd = [sys.executable, "-m", "tests.support.mavlink_abuse", str(port), str(rate)]
     return subprocess.Popen([*cmd, str(seconds), kind, *extra], stdout=subprocess.PIPE, text=True)
 
 
@@ -111,7 +111,7 @@ def test_a_ten_kilohertz_flood_from_one_source_leaves_the_pings_answered(rig, ki
 def test_learnt_peers_expire_and_the_table_comes_back(rig) -> None:
     link, gcs, port = rig
     table = link._port.table  # noqa: SLF001
-    from tests.contract.mavlink_abuse import heartbeat
+    from tests.support.mavlink_abuse import heartbeat
 
     sent = flood(port, 2000, 0.5, [heartbeat()], new_ports=True)  # 1000 "ground stations"
     assert sent == 1000

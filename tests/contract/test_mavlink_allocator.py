@@ -15,7 +15,7 @@ from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, LinkConfigError, M
 from bridges.mavlink.params import ParamSpec, ParamType
 from ftcap_hil.core.messages import ThrusterCommand
 from ftcap_hil.core.status import AllocatorStatus
-from tests.contract.mavlink_support import (
+from tests.support.mavlink_peers import (
     DIALECT,
     RawPeer,
     free_udp_ports,

@@ -21,7 +21,7 @@ from bridges.mavlink.allocator_params import allocator_param_specs
 from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink.vessel import MavlinkVesselLink
 from ftcap_hil.core.cycle import CoreConfig
-from tests.contract.mavlink_support import free_udp_ports, wait_until
+from tests.support.mavlink_peers import free_udp_ports, wait_until
 
 pytestmark = [pytest.mark.timeout(90), pytest.mark.usefixtures("no_leaked_threads")]
 

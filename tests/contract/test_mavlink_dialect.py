@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from bridges.mavlink import dialect as mavlink_dialect
-from tests.contract.mavlink_support import DIALECT
+from tests.support.mavlink_peers import DIALECT
 
 
 def _message_ids(xml: Path) -> dict[int, str]:

@@ -24,7 +24,7 @@ from bridges.mavlink.vessel import (
 )
 from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry, ThrusterCommand
 from ftcap_hil.core.status import AllocatorStatus
-from tests.contract.mavlink_support import (
+from tests.support.mavlink_peers import (
     DIALECT,
     RawPeer,
     free_udp_ports,

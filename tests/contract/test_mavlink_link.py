@@ -22,7 +22,7 @@ from bridges.mavlink.config import (
 )
 from bridges.mavlink.link import MavlinkPort, Route
 from ftcap_hil.core.errors import MalformedMessage
-from tests.contract.mavlink_support import RawPeer, free_udp_ports
+from tests.support.mavlink_peers import RawPeer, free_udp_ports
 
 pytestmark = [pytest.mark.timeout(30)]
 

@@ -1,10 +1,10 @@
 """Interop: MAVProxy lists and sets the allocator's and the vessel's parameters and injects
-failures into the vessel, in the two ways the README gives:
+failures into the vessel, in the two ways docs/hil.md gives:
 
 * standing in for the ground station on its inbox port (``--master=udp:127.0.0.1:14550``,
   which both links list as a peer), and
 * as an extra ground station with one link to the allocator's inbox only
-  (``--master=udpout:127.0.0.1:14570``, the README's line, also the Docker one): MAVProxy
+  (``--master=udpout:127.0.0.1:14570``, the line of docs/hil.md, also the Docker one): MAVProxy
   sends on that one link, and the allocator relays what is for the vessel, and back;
   with MAVLink 2 signing too (``signing key PASSPHRASE``).
 
@@ -32,7 +32,7 @@ from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
 from ftcap_hil.core.messages import FaultInjection, FaultKind
-from tests.contract.mavlink_support import free_udp_ports, wait_until
+from tests.support.mavlink_peers import free_udp_ports, wait_until
 
 MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
 pytestmark = [

@@ -36,7 +36,7 @@ from bridges.mavlink.geodesy import GeodeticOrigin  # noqa: E402
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink  # noqa: E402
 from ftcap_hil.core.cycle import CoreConfig  # noqa: E402
 from ftcap_hil.core.messages import Odometry  # noqa: E402
-from tests.contract.mavlink_support import free_udp_ports, wait_until  # noqa: E402
+from tests.support.mavlink_peers import free_udp_ports, wait_until  # noqa: E402
 
 pytestmark = [pytest.mark.timeout(120)]
 MAVSDK_SYSTEM = 245

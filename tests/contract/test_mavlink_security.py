@@ -27,7 +27,7 @@ from bridges.mavlink.vessel import (
 from ftcap_hil.config.bridges import mavlink_endpoint_from
 from ftcap_hil.config.tables import Table
 from ftcap_hil.core.errors import ConfigError
-from tests.contract.mavlink_support import (
+from tests.support.mavlink_peers import (
     DIALECT,
     RawPeer,
     free_udp_ports,

@@ -25,7 +25,7 @@ from bridges.mavlink.vessel import (
 )
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.messages import FaultKind, Odometry
-from tests.contract.mavlink_support import (
+from tests.support.mavlink_peers import (
     DIALECT,
     RawPeer,
     free_udp_ports,

@@ -21,7 +21,7 @@ from bridges.mavlink.vessel import (
     decode_inject_failure,
 )
 from ftcap_hil.core.messages import FaultInjection, FaultKind, Odometry
-from tests.contract.mavlink_support import (
+from tests.support.mavlink_peers import (
     DIALECT,
     RawPeer,
     free_udp_ports,

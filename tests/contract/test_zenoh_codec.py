@@ -59,7 +59,7 @@ def status_four_thrusters(**changes: object) -> AllocatorStatus:
         esc_age_s=(0.01, math.inf, 0.02, 0.03),
     )
     values.update(changes)
-    return AllocatorStatus(**values)  # type: ignore[arg-type]
+    return AllocatorStatus.checked(**values)
 
 
 def test_keys_of_a_vessel() -> None:
@@ -167,9 +167,14 @@ def test_a_v1_status_without_the_later_fields_decodes() -> None:
         {"esc_rpm": (1.0,)},
     ],
 )
-def test_status_encoder_refuses_inconsistent_status(changes: dict[str, object]) -> None:
+def test_an_inconsistent_status_cannot_be_built(changes: dict[str, object]) -> None:
     with pytest.raises(MalformedMessage):
-        encode_status(status_four_thrusters(**changes))
+        status_four_thrusters(**changes)
+
+
+def test_a_delta_std_json_cannot_carry_is_refused() -> None:
+    with pytest.raises(MalformedMessage):
+        encode_status(status_four_thrusters(delta_std=(0.01, math.nan, 0.05, 0.01)))
 
 
 def test_encoders_refuse_non_finite_values() -> None:

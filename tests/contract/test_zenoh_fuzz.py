@@ -42,7 +42,7 @@ PUBLISHER = textwrap.dedent(
     import json, sys, time, zenoh
     sys.path.insert(0, sys.argv[3])
     from bridges.zenoh_io.link import make_config
-    from tests.fuzz.payloads import zenoh_payloads
+    from tests.support.payloads import zenoh_payloads
     port, plan = int(sys.argv[1]), json.loads(sys.argv[2])
     with zenoh.open(make_config("client", port)) as session:
         pubs = {

@@ -30,6 +30,7 @@ from bridges.zenoh_io.link import (
     ZenohVesselLink,
     make_config,
 )
+from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import (
     FaultInjection,
     FaultKind,
@@ -302,8 +303,11 @@ def test_malformed_payloads_are_counted_and_dropped(
 
 
 def test_bad_status_is_refused_without_raising(allocator: ZenohAllocatorLink) -> None:
-    short = dataclasses.replace(status_with_cycle(1), u=(1.0,))  # 1 command for 4 thrusters
-    assert allocator.publish_status(short) is False
+    with pytest.raises(MalformedMessage, match="u: expected 0 or 4"):  # checked when built
+        AllocatorStatus.checked(delta_hat=(1.0,) * 4, u=(1.0,))
+    # What JSON cannot carry: an unknown delta_std (NaN), a NaN no check caught.
+    unknown_std = dataclasses.replace(status_with_cycle(1), delta_std=(0.0, math.nan, 0.0, 0.0))
+    assert allocator.publish_status(unknown_std) is False
     nan_status = dataclasses.replace(status_with_cycle(1), delta_hat=(1.0, math.nan, 1.0, 1.0))
     assert allocator.publish_status(nan_status) is False
     assert allocator.publish_errors == 2

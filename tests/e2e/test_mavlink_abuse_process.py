@@ -18,9 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from tests.contract.mavlink_abuse import Pinger
-from tests.contract.mavlink_support import RawPeer
 from tests.e2e.rig import Rig, wait_until
+from tests.support.mavlink_abuse import Pinger
+from tests.support.mavlink_peers import RawPeer
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(240)]
 
@@ -36,7 +36,7 @@ def _rss_kib(pid: int) -> int:
 def _flood(gcs: RawPeer, port: int, rate: float, seconds: float, kind: str, *extra: str) -> int:
     """Flood from a process of its own while the ground station keeps reading (its socket
     buffer would otherwise overflow and lose answers that did come)."""
-    cmd = [sys.executable, "-m", "tests.contract.mavlink_abuse", str(port), str(rate)]
+    cmd = [sys.executable, "-m", "tests.support.mavlink_abuse", str(port), str(rate)]
     proc = subprocess.Popen([*cmd, str(seconds), kind, *extra], stdout=subprocess.PIPE, text=True)
     while proc.poll() is None:
         gcs.pump(0.1)

@@ -19,7 +19,7 @@ from ftcap_hil.core.effectiveness.geometry import (
     paper_four_thrusters,
 )
 from ftcap_hil.core.estimation.config import wrench_scale
-from tests.unit.support import six_thrusters
+from tests.support.vessels import six_thrusters
 
 DT_S = 0.1
 VESSELS = {"paper4": paper_four_thrusters, "six": six_thrusters}

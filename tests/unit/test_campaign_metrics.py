@@ -28,7 +28,7 @@ from ftcap_hil.report.campaign_metrics import (
     run_metrics,
 )
 from ftcap_hil.report.campaign_summary import derive, fault_groups, fault_rows, run_groups
-from ftcap_hil.report.records import RunRecord, column_names, flag_names
+from ftcap_hil.report.records import RunRecord, column_names
 from ftcap_hil.runtime.offline import run_mode
 
 DT = 0.1
@@ -48,7 +48,6 @@ class Synthetic:
         self.n = self.sc.steps
         self.t = np.arange(self.n) * dt_s
         self.c: dict[str, Any] = {k: np.zeros(self.n) for k in column_names(self.sc)}
-        self.c.update({k: np.zeros(self.n) for k in flag_names(self.sc)})
         self.c["t"] = self.t.copy()
         for i in range(1, 5):
             self.c[f"delta_{i}"][:] = 1.0

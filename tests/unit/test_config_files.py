@@ -4,6 +4,7 @@ commands with exit code 2 and one line."""
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -257,8 +258,20 @@ def test_every_shipped_file_loads() -> None:
 def test_every_shipped_zenoh_config_loads() -> None:
     from bridges.zenoh_io.session import load_config as load_zenoh
 
-    for name in ("allocator", "vessel", "gcs"):
-        load_zenoh(DATA / "zenoh" / f"{name}.json5")
+    loaded = {
+        name: load_zenoh(DATA / "zenoh" / f"{name}.json5")
+        for name in ("allocator", "vessel", "gcs")
+    }
+    for name, mode, listen, connect in [
+        ("allocator", "router", ["tcp/127.0.0.1:7447"], []),
+        ("vessel", "client", [], ["tcp/127.0.0.1:7447"]),
+        ("gcs", "client", [], ["tcp/127.0.0.1:7447"]),
+    ]:
+        conf = loaded[name]
+        assert json.loads(conf.get_json("mode")) == mode, name
+        assert json.loads(conf.get_json("listen/endpoints")) == listen, name
+        assert json.loads(conf.get_json("connect/endpoints")) == connect, name
+        assert json.loads(conf.get_json("scouting/multicast/enabled")) is False, name
 
 
 # ------------------------------------------------------------------ the commands

@@ -14,6 +14,7 @@ from ftcap_hil.core.effectiveness.geometry import (
     paper_four_thrusters,
 )
 from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.status import Mode
 
@@ -151,7 +152,7 @@ def test_forced_dead_takes_thruster_out_for_that_cycle_only() -> None:
     run(core, 20, truth=Truth(np.ones(4), np.zeros(4)))
     core.reset_command(np.array([0.08, 0.0, 0.0, 0.0]))
     forced = np.array([True, False, False, False])
-    r = core.step(TAU_D, None, forced_dead=forced)
+    r = core.step(TAU_D, None, evidence=Evidence.of(4, dead=forced))
     assert r.estimate.delta_hat[0] == 0.0
     assert r.allocation.dead[0] and r.faulty[0]
     assert r.u[0] == pytest.approx(0.0, abs=1e-15)  # 0.08 is within one step (0.09) of 0
@@ -160,13 +161,26 @@ def test_forced_dead_takes_thruster_out_for_that_cycle_only() -> None:
     assert not r.allocation.dead[0]
 
 
-def test_dt_s_sets_the_rate_box() -> None:
+def test_evidence_counts_a_dead_and_stalled_thruster_as_dead() -> None:
+    ev = Evidence.of(4, dead=[True, False, False, False], stalled=[True, True, False, False])
+    assert ev.dead.tolist() == [True, False, False, False]
+    assert ev.stalled.tolist() == [False, True, False, False]
+    assert ev.out.tolist() == [True, True, False, False]
+    assert not Evidence.none(4).out.any()
+
+
+def test_evidence_of_the_wrong_length_is_refused() -> None:
+    with pytest.raises(ValueError, match=r"evidence.stalled: expected 4 flags"):
+        Evidence.of(4, stalled=[True, False])
+
+
+def test_elapsed_s_sets_the_rate_box() -> None:
     ths = paper_four_thrusters(rate_limit=0.5)
     core = FtcapCore(effectiveness(ths), ths, 0.1, CoreConfig(mode=Mode.CAP))
     far = np.array([10.0, 0.0, 0.0])  # saturating surge demand
-    r = core.step(far, None, dt_s=0.1)
+    r = core.step(far, None, elapsed_s=0.1)
     np.testing.assert_allclose(np.abs(r.u), 0.05, atol=1e-9)  # 0.5 N/s * 0.1 s
-    r = core.step(far, None, dt_s=0.04)
+    r = core.step(far, None, elapsed_s=0.04)
     np.testing.assert_allclose(np.abs(r.u), 0.07, atol=1e-9)  # + 0.5 N/s * 0.04 s
 
 
@@ -184,11 +198,11 @@ def test_column_count_mismatch_raises() -> None:
         FtcapCore(B[:, :3], THS, DT_S)
 
 
-def test_dt_s_default_is_the_configured_period() -> None:
+def test_elapsed_s_default_is_the_configured_period() -> None:
     ths = paper_four_thrusters(rate_limit=0.5)
     core = FtcapCore(effectiveness(ths), ths, 0.1, CoreConfig(mode=Mode.CAP))
     far = np.array([10.0, 0.0, 0.0])
-    core.step(far, None, dt_s=0.02)  # one short cycle: |u| = 0.01
+    core.step(far, None, elapsed_s=0.02)  # one short cycle: |u| = 0.01
     r = core.step(far, None)  # default: the configured 0.1 s, so |u| = 0.01 + 0.05
     np.testing.assert_allclose(np.abs(r.u), 0.06, atol=1e-9)
 

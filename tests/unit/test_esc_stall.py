@@ -8,6 +8,7 @@ import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
+from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.esc_watchdog import EscStallMonitor
 from ftcap_hil.runtime.transitions import TransitionLog
@@ -67,7 +68,7 @@ def test_the_core_allocates_a_stalled_thruster_as_dead_and_reports_it() -> None:
     ths = paper_four_thrusters()
     core = FtcapCore(effectiveness(ths), ths, 0.2827, CoreConfig(mode=Mode.CAP))
     stalled = np.array([False, True, False, False])
-    r = core.step(np.array([0.05, 0.0, 0.0]), None, stalled=stalled)
+    r = core.step(np.array([0.05, 0.0, 0.0]), None, evidence=Evidence.of(4, stalled=stalled))
     assert r.faulty.tolist() == [False, True, False, False]
     assert r.estimate.delta_hat[1] == 0.0 and r.allocation.dead[1]
     free = core.step(np.array([0.05, 0.0, 0.0]), None)

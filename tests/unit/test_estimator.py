@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet, effectiveness, paper_four_thrusters
 from ftcap_hil.core.estimation.config import EstimatorConfig, wrench_scale
 from ftcap_hil.core.estimation.windowed import LiteralEstimator, WindowedEstimator
-from tests.unit.support import six_thrusters
+from tests.support.vessels import six_thrusters
 
 VESSELS = {"paper4": paper_four_thrusters, "six": six_thrusters}
 

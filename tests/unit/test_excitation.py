@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from ftcap_hil.core.allocation.excitation import Excitation, ExcitationConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet, effectiveness, paper_four_thrusters
-from tests.unit.support import eight_thrusters, six_thrusters
+from tests.support.vessels import eight_thrusters, six_thrusters
 
 VESSELS = {"paper4": paper_four_thrusters, "six": six_thrusters, "eight": eight_thrusters}
 

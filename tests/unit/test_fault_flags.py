@@ -7,6 +7,7 @@ import numpy as np
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.status import Mode
 
@@ -18,7 +19,7 @@ def _oracle() -> FtcapCore:
 
 def _flag(core: FtcapCore, delta1: float, forced: np.ndarray | None = None) -> bool:
     truth = Truth(np.array([delta1, 1.0, 1.0, 1.0]), np.zeros(4))
-    return bool(core.step(np.zeros(3), None, truth, forced_dead=forced).faulty[0])
+    return bool(core.step(np.zeros(3), None, truth, evidence=Evidence.of(4, dead=forced)).faulty[0])
 
 
 def test_flag_sets_below_threshold_and_clears_only_above_clear_level() -> None:

@@ -12,7 +12,7 @@ import pytest
 from ftcap_hil.config.vessel import thrusters_from_table
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.errors import ConfigError
-from tests.unit.support import (
+from tests.support.vessels import (
     EQ22_L03,
     EQ22_L05,
     S,
@@ -82,22 +82,23 @@ def test_eight_thruster_vessel() -> None:
 
 
 @pytest.mark.parametrize(
-    ("direction", "angle_deg"),
-    [
-        ([1.0, 1.0], 45.0),
-        ([0.0, 2.0], 90.0),
-        ([-1.0, 0.0], 180.0),
-        ([3.0, -4.0], -53.13010235415598),
+    ("direction", "angle_deg", "column"),
+    [  # the column of B at (x, y) = (0.7, -0.2): (cos a, sin a, x sin a - y cos a)
+        ([1.0, 1.0], 45.0, [S, S, 0.9 * S]),
+        ([0.0, 2.0], 90.0, [0.0, 1.0, 0.7]),
+        ([-1.0, 0.0], 180.0, [-1.0, 0.0, -0.2]),
+        ([3.0, -4.0], -53.13010235415598, [0.6, -0.8, -0.44]),
     ],
 )
-def test_direction_equals_angle(direction: list[float], angle_deg: float) -> None:
+def test_direction_equals_angle(
+    direction: list[float], angle_deg: float, column: list[float]
+) -> None:
     base = {"name": "t", "x": 0.7, "y": -0.2, "u_min": -1.0, "u_max": 1.0}
     by_dir = thrusters_from_table({"thruster": [{**base, "direction": direction}]})
     by_angle = thrusters_from_table({"thruster": [{**base, "angle_deg": angle_deg}]})
-    assert by_dir.thrusters[0].angle_rad == pytest.approx(
-        by_angle.thrusters[0].angle_rad, abs=1e-12
-    )
-    np.testing.assert_allclose(effectiveness(by_dir), effectiveness(by_angle), rtol=0, atol=1e-12)
+    for ths in (by_dir, by_angle):
+        assert ths.thrusters[0].angle_rad == pytest.approx(math.radians(angle_deg), abs=1e-12)
+        np.testing.assert_allclose(effectiveness(ths), np.array([column]).T, rtol=0, atol=1e-12)
 
 
 def _one(**overrides: object) -> dict[str, object]:

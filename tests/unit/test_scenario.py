@@ -15,7 +15,7 @@ from ftcap_hil.core.effectiveness.geometry import effectiveness
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.status import Mode
-from tests.unit.support import EQ22_L03
+from tests.support.vessels import EQ22_L03
 
 BASE = """
 [scenario]

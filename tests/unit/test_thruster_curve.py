@@ -102,8 +102,10 @@ def test_curve_map_round_trip_within_one_count() -> None:
 def test_linear_curve_map_equals_the_linear_map() -> None:
     lin = CurveForceMap.create([ThrusterCurve.linear(36.4)] * 2)
     plain = ForceRawMap.create([36.4, 36.4])
-    for u in ([10.0, -20.0], [36.4, -36.4], [0.3, -0.001]):
-        assert lin.to_raw(u).tolist() == plain.to_raw(u).tolist()
+    # raw = round(u / 36.4 N * 8191), saturated at +-8191; under half a step is 0
+    for u, raw in [([10.0, -20.0], [2250, -4501]), ([36.4, -36.4], [8191, -8191])]:
+        assert lin.to_raw(u).tolist() == raw and plain.to_raw(u).tolist() == raw
+    assert lin.to_raw([0.3, -0.001]).tolist() == plain.to_raw([0.3, -0.001]).tolist() == [68, 0]
 
 
 def test_a_wrong_curve_on_the_allocator_side_is_a_thrust_error() -> None:

@@ -116,17 +116,21 @@ class Excitation:
         return out
 
     def __call__(
-        self, delta_hat: FloatArray, dead: BoolArray, advance: bool = True
-    ) -> ExcitationOutput:
+        self, delta_hat: FloatArray, dead: BoolArray, advance: bool = True,
+        still: BoolArray | None = None,
+    ) -> ExcitationOutput:  # fmt: skip
         """Excitation for this cycle. ``advance``: a new estimation sample was taken, so the
         sequence moves on (levels are held for whole estimation samples, whatever the
-        allocation rate). The returned arrays are shared: treat them as read-only."""
+        allocation rate). ``still`` (m,): thrusters left out of the dither (their drive
+        alarms, or the motion alone suspects them) that still get probes if dead. The
+        returned arrays are shared: treat them as read-only."""
         cfg = self.config
         level = self._cycle // cfg.dither_period
+        quiet = dead if still is None else dead | still
         # The PRBS level only changes at period boundaries; a change of the dead set must
         # not leave a stale dither on a thruster that has just been taken out.
-        if level != self._cached_level or (dead.any() and (self._cached[dead] != 0.0).any()):
-            self._cached = self._null_dither(delta_hat, ~dead)
+        if level != self._cached_level or (quiet.any() and (self._cached[quiet] != 0.0).any()):
+            self._cached = self._null_dither(delta_hat, ~quiet)
             self._cached_level = level
         u_pref, limit = self._cached, self._zero
         if cfg.probe_interval and cfg.probe_amplitude and dead.any():

@@ -17,6 +17,7 @@ evidence; one that sees the velocities alone cannot.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -25,6 +26,32 @@ import numpy as np
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
 from ftcap_hil.core.models.vessel3dof import PlantModel, Vessel3DOF
+
+Prediction = tuple[FloatArray, FloatArray, FloatArray]  # (s1, A, G), as StepModel.predict
+
+# Longest midpoint step ("trapezoid" models): a longer estimation interval (one that spans
+# wave periods) is integrated in as many substeps, their Jacobians chained.
+MAX_STEP_S = 0.25
+
+
+def chained(
+    one: Callable[[FloatArray, FloatArray, float], Prediction],
+    s0: FloatArray,
+    w: FloatArray,
+    dt: float,
+    euler: bool,
+) -> Prediction:
+    """``one(s, w, h)`` -> (s1, A_i, G_i) over ``dt`` in n equal substeps: one for "euler",
+    else the fewest of at most :data:`MAX_STEP_S`. The state is carried from one substep to
+    the next and the Jacobians chained: A = A_n ... A_1, G_i folded in as G = A_i G + G_i."""
+    n = 1 if euler else max(1, math.ceil(dt / MAX_STEP_S - 1e-9))
+    if n == 1:
+        return one(s0, w, dt)
+    s, A, G = s0, np.eye(s0.size), np.zeros((s0.size, w.size))
+    for _ in range(n):
+        s, a_i, g_i = one(s, w, dt / n)
+        A, G = a_i @ A, a_i @ G + g_i
+    return s, A, G
 
 
 class StepModel(Protocol):
@@ -137,22 +164,12 @@ class VesselStep:
             jac[:, j] = (self.plant.nu_dot(nu_h, w) - f0) / h
         return jac
 
-    # Longest midpoint step ("trapezoid" models): a longer estimation interval (one that
-    # spans wave periods) is integrated in as many substeps, their Jacobians chained.
-    MAX_STEP_S = 0.25
-
     def predict(
         self, s0: FloatArray, w: FloatArray, dt: float
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """nu1 (3,) after ``dt`` s under the body wrench ``w`` (3,), with A (3, 3) and G (3, 3)."""
-        n = 1 if self._euler else max(1, math.ceil(dt / self.MAX_STEP_S - 1e-9))
-        if n == 1:
-            return self._one(s0, w, dt)
-        s, A, G = s0, np.eye(3), np.zeros((3, 3))
-        for _ in range(n):
-            s, a_i, g_i = self._one(s, w, dt / n)
-            A, G = a_i @ A, a_i @ G + g_i
-        return s, A, G
+        """nu1 (3,) after ``dt`` s under the body wrench ``w`` (3,), with A (3, 3) and G (3, 3)
+        (substeps: :func:`chained`)."""
+        return chained(self._one, s0, w, dt, self._euler)
 
     def one(
         self, s0: FloatArray, w: FloatArray, dt: float
@@ -214,13 +231,9 @@ class PoseStep:
     def predict(
         self, s0: FloatArray, w: FloatArray, dt: float
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """s1 (6,) after ``dt`` s under the body wrench ``w`` (3,), A (6, 6), G (6, 3)."""
-        n = 1 if self._euler else max(1, math.ceil(dt / VesselStep.MAX_STEP_S - 1e-9))
-        s, A, G = s0, np.eye(6), np.zeros((6, 3))
-        for _ in range(n):
-            s, a_i, g_i = self._one(s, w, dt / n)
-            A, G = a_i @ A, a_i @ G + g_i
-        return s, A, G
+        """s1 (6,) after ``dt`` s under the body wrench ``w`` (3,), A (6, 6), G (6, 3)
+        (substeps: :func:`chained`)."""
+        return chained(self._one, s0, w, dt, self._euler)
 
     def _one(
         self, s0: FloatArray, w: FloatArray, h: float

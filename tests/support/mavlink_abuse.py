@@ -5,7 +5,7 @@ datagrams, frames with a flipped byte (CRC), truncated frames, bogus length fiel
 MAVLink 1 frames, valid frames from an unknown system (setpoints, parameter writes, fault
 injections, parameter list requests), frames signed with a wrong key, oversized datagrams
 and datagrams of many frames. :func:`flood` sends datagrams at a rate, from one socket or a
-new source port per datagram; ``python -m tests.contract.mavlink_abuse PORT RATE SECONDS
+new source port per datagram; ``python -m tests.support.mavlink_abuse PORT RATE SECONDS
 KIND [--new-ports]`` runs it in a process of its own and prints the number sent.
 
 :func:`udp_drops` reads the kernel's drop counter of a bound UDP port (``/proc/net/udp``),
@@ -195,7 +195,7 @@ def rss_bytes() -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Flood from a process of its own (see the module docstring); prints the count sent."""
-    parser = argparse.ArgumentParser(prog="python -m tests.contract.mavlink_abuse")
+    parser = argparse.ArgumentParser(prog="python -m tests.support.mavlink_abuse")
     parser.add_argument("port", type=int)
     parser.add_argument("rate_hz", type=float)
     parser.add_argument("duration_s", type=float)

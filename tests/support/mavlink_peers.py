@@ -1,4 +1,5 @@
-"""Helpers for the MAVLink contract tests (no tests here; the fixtures are in conftest.py).
+"""Helpers for the MAVLink contract tests and benchmarks (no tests here; the fixtures are in
+tests/contract/conftest.py).
 
 The far end of every contract test is bare pymavlink (``RawPeer``) with the ftcap dialect,
 on real loopback UDP: never our own transport pretending to be the other side.

@@ -1,0 +1,152 @@
+"""The drives' diagnosis, its types: what a drive is on its data sheet (:class:`DriveModel`),
+what it reports (:class:`DriveReport`), the diagnosis settings (:class:`DiagnosisConfig`),
+its hypotheses and its verdict per thruster (:class:`ShaftVerdict`). The diagnosis itself:
+:mod:`ftcap_hil.core.estimation.shaft`."""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ftcap_hil.core.messages import BoolArray, FloatArray
+
+
+class Hypothesis(enum.Enum):
+    """What a thruster's drive says about it (module docstring)."""
+
+    HEALTHY = "healthy"
+    TELEMETRY_LOST = "telemetry-lost"
+    DRIVE_DEAD = "drive-dead"
+    JAMMED = "jammed"
+    STUCK = "stuck"
+    WEAK = "weak"
+    LOAD_LOSS = "load-loss"
+    LOAD_GAIN = "load-gain"
+    VENTILATION = "ventilation"
+
+
+# What the allocator may act on: a removal or a partial loss needs one of these.
+ACTIONABLE = frozenset(
+    {Hypothesis.DRIVE_DEAD, Hypothesis.JAMMED, Hypothesis.STUCK, Hypothesis.WEAK,
+     Hypothesis.LOAD_LOSS, Hypothesis.LOAD_GAIN}
+)  # fmt: skip
+
+
+NOT_TURNING = frozenset({Hypothesis.DRIVE_DEAD, Hypothesis.JAMMED})
+LOAD = frozenset({Hypothesis.LOAD_LOSS, Hypothesis.LOAD_GAIN})
+
+
+@dataclass(frozen=True)
+class DriveModel:
+    """One actuator as its data sheets give it. A shaft: ``k_thrust`` N/(rev/s)^2,
+    ``k_torque`` N m/(rev/s)^2, ``watts_per_amp`` = efficiency x voltage, ``inflow_*`` =
+    (1 - w) / (J_0 D) (0: in-flow not modelled); a servo (``is_shaft`` False): only
+    ``full_force_n`` and ``time_constant_s`` matter."""
+
+    full_force_n: float
+    time_constant_s: float
+    is_shaft: bool = True
+    k_thrust: float = 1.0
+    k_torque: float = 0.0
+    watts_per_amp: float = 1.0
+    idle_a: float = 0.0
+    inflow_thrust: float = 0.0
+    inflow_torque: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("full_force_n", "k_thrust", "watts_per_amp"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"drive model: {name} must be > 0, got {getattr(self, name)}")
+        if not self.time_constant_s >= 0.0:
+            raise ValueError(
+                f"drive model: time_constant_s must be >= 0, got {self.time_constant_s}"
+            )
+
+
+@dataclass(frozen=True)
+class DriveReport:
+    """One drive's telemetry as the allocator received it: at ``t_s`` (its clock, s),
+    thruster ``index`` (0-based), ``speed`` rev/s (a servo: its deflection, fraction of
+    full), ``current_a`` A (NaN: not reported)."""
+
+    t_s: float
+    index: int
+    speed: float
+    current_a: float = math.nan
+
+
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    """Bands, tests and decisions of the module docstring. The bands are residual
+    standard deviations fitted on healthy data; ``cusum_*`` in band units."""
+
+    floor_rel: float = 0.1
+    probe_rel: float = 0.03  # a thruster that is not turning is judged again from this
+    band_rel: float = 0.03
+    band_abs: float = 0.005
+    timing_s: float = 0.02  # the prediction's time is known to this (sampling) ...
+    timing_rel: float = 0.5  # ... plus this share of the drive's time constant (its error)
+    current_rel: float = 0.03
+    current_abs: float = 0.02
+    cusum_k: float = 1.0
+    cusum_h: float = 12.0
+    stall_rel: float = 0.1  # |n_m| below this share of the predicted speed: not turning
+    jam_current_rel: float = 0.5  # drawn current (above idle) of the predicted: jammed
+    stuck_window_s: float = 2.0
+    hold_s: float = 3.0
+    clear_z: float = 2.5
+    clear_s: float = 1.0
+    telemetry_timeout_s: float = 0.5
+    latency_s: float = 0.0  # the telemetry's known latency: samples are judged at t - latency
+    cal_tau_s: float = 60.0  # online calibration of speed and current scales (0: off)
+    cal_limit: float = 0.15  # ... within this share of the data sheet
+    cal_samples: int = 20  # commanded samples that commission the model, before any test
+    motion_removal_s: float = 30.0  # a motion-only removal of a thruster whose drive shows
+    # nothing wrong is acted upon only after it has held this long (hull or interaction loss)
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"diagnosis.{name}: expected a finite number >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ShaftVerdict:
+    """Per thruster (m,): the hypothesis, the effectiveness its drive shows (1 where it
+    shows nothing wrong), a stuck thruster's held force (N, NaN otherwise), the thrust the
+    latest speed implies (N, NaN without telemetry), whether telemetry is fresh, whether a
+    shaft alarm is up (no dither on it), and the latest normalised residuals."""
+
+    hypothesis: tuple[Hypothesis, ...]
+    delta: FloatArray
+    held_n: FloatArray
+    thrust_n: FloatArray
+    fresh: BoolArray
+    alarm: BoolArray
+    r_thrust: FloatArray
+    r_load: FloatArray
+
+    @property
+    def load_factor(self) -> FloatArray:
+        """(m,) what the speed does not show: the effectiveness of a load-type loss (the
+        shaft turns at speed, its thrust is down), 1 otherwise; the motion filter's input is
+        the speed's thrust times this."""
+        load = np.array([h in LOAD for h in self.hypothesis], dtype=bool)
+        return np.asarray(np.where(load, self.delta, 1.0))
+
+    @property
+    def actionable(self) -> BoolArray:
+        """(m,) the drive itself shows a loss the allocator may act on."""
+        return np.array([h in ACTIONABLE for h in self.hypothesis], dtype=bool)
+
+
+def verdict_without_telemetry(m: int) -> ShaftVerdict:
+    """The verdict when no drive reports at all (motion-only)."""
+    nan = np.full(m, math.nan)
+    return ShaftVerdict(
+        (Hypothesis.TELEMETRY_LOST,) * m, np.ones(m), nan, nan.copy(), np.zeros(m, bool),
+        np.zeros(m, bool), nan.copy(), nan.copy(),
+    )  # fmt: skip

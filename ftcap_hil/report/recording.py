@@ -14,7 +14,7 @@ Derived, not per row: the path (every :data:`PATH_PERIOD_S`, poses every
 the scenario's schedule as the injections that reproduce it (``core.faults.injection_plan``)
 and the log lines: each injection, each flag that rises or falls (``faulty_i``, ``dead_i``,
 ``fallback``), and the ``logs`` handed in. The layout in ``docs/foxglove-layout.json``
-shows them (docs/foxglove.md).
+shows them (docs/ros2-and-foxglove.md).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""rmw_zenoh's names, against the examples of its design document (docs/design.md of
+"""rmw_zenoh's names, against the examples of its design document (design.md in the docs of
 ros2/rmw_zenoh), its attachment against zenoh-ext's serializer, and the REP-103 frames."""
 
 from __future__ import annotations

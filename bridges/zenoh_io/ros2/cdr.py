@@ -37,9 +37,11 @@ class _Writer:
         self.buf = bytearray(CDR_LE)
 
     def align(self, size: int) -> None:
+        """Pad to a multiple of ``size`` counted after the header."""
         self.buf += bytes(-(len(self.buf) - 4) % size)
 
     def primitives(self, base: str, values: Iterable[Any]) -> None:
+        """Primitives of one type, aligned once (the rest fall in line)."""
         code, size = PRIMITIVES[base]
         items = list(values)
         if items:
@@ -47,15 +49,18 @@ class _Writer:
             self.buf += struct.pack(f"<{len(items)}{code}", *items)
 
     def string(self, text: str) -> None:
+        """Length (with the NUL), UTF-8 bytes, NUL."""
         data = text.encode("utf-8")
         self.primitives("uint32", (len(data) + 1,))
         self.buf += data + b"\x00"
 
     def message(self, name: str, value: Mapping[str, Any]) -> None:
+        """The fields of type ``name`` in order (missing: zero)."""
         for f in self.registry[name].fields:
             self.field(f, value.get(f.name))
 
     def field(self, f: Field, value: Any) -> None:
+        """One field: an element, a fixed array or a counted sequence."""
         if f.array is None and not f.sequence:
             self.element(f, value)
             return
@@ -71,6 +76,7 @@ class _Writer:
                 self.element(f, item)
 
     def element(self, f: Field, value: Any) -> None:
+        """One element of a field: a primitive, a string or a message."""
         if f.base in PRIMITIVES:
             self.primitives(f.base, (0 if value is None else value,))
         elif f.base == STRING:
@@ -98,6 +104,7 @@ class _Reader:
         self.order = order
 
     def take(self, n: int) -> bytes:
+        """The next ``n`` bytes; MalformedMessage past the end."""
         if n > len(self.data) - self.pos:
             raise MalformedMessage(f"CDR payload truncated at byte {self.pos} (needs {n} more)")
         out = self.data[self.pos : self.pos + n]
@@ -105,6 +112,7 @@ class _Reader:
         return out
 
     def primitives(self, base: str, count: int) -> tuple[Any, ...]:
+        """``count`` primitives of one type, aligned once."""
         code, size = PRIMITIVES[base]
         if count == 0:
             return ()
@@ -112,12 +120,14 @@ class _Reader:
         return struct.unpack(f"{self.order}{count}{code}", self.take(size * count))
 
     def count(self, f: Field, element_size: int) -> int:
+        """A sequence's element count, refused if the bytes left cannot hold it."""
         (n,) = self.primitives("uint32", 1)
         if n * element_size > len(self.data) - self.pos:
             raise MalformedMessage(f"{f.name}: {n} elements announced, the payload is shorter")
         return int(n)
 
     def string(self) -> str:
+        """A string; MalformedMessage without its NUL or not UTF-8."""
         (n,) = self.primitives("uint32", 1)
         if n == 0:  # some writers send an empty string as length 0
             return ""
@@ -130,9 +140,11 @@ class _Reader:
             raise MalformedMessage(f"CDR string is not UTF-8: {e}") from None
 
     def message(self, name: str) -> dict[str, Any]:
+        """The fields of type ``name`` as a dict."""
         return {f.name: self.field(f) for f in self.registry[name].fields}
 
     def field(self, f: Field) -> Any:
+        """One field: an element, a fixed array or a counted sequence."""
         if f.array is None and not f.sequence:
             return self.element(f)
         size = PRIMITIVES[f.base][1] if f.base in PRIMITIVES else 1
@@ -142,6 +154,7 @@ class _Reader:
         return [self.element(f) for _ in range(n)]
 
     def element(self, f: Field) -> Any:
+        """One element: a primitive, a string or a message."""
         if f.base in PRIMITIVES:
             return self.primitives(f.base, 1)[0]
         if f.base == STRING:

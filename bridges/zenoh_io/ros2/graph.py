@@ -1,6 +1,6 @@
 """rmw_zenoh's names on Zenoh: data key expressions, liveliness tokens, QoS text, attachments.
 
-As rmw_zenoh's design document (``docs/design.md`` of ros2/rmw_zenoh) states them:
+As the design document of ros2/rmw_zenoh (``design.md`` in its ``docs`` folder) states them:
 
 * data of a topic on ``<domain_id>/<fully qualified name without its leading />/<DDS type
   name>/<type hash>``, e.g. ``0/chatter/std_msgs::msg::dds_::String_/RIHS01_df66...``;

@@ -49,10 +49,12 @@ def stamp_s(value: Msg) -> float:
 
 
 def header(t_s: float, frame_id: str = "") -> Msg:
+    """``std_msgs/Header`` stamped ``t_s`` in ``frame_id``."""
     return {"stamp": stamp(t_s), "frame_id": frame_id}
 
 
 def vector3(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> Msg:
+    """``geometry_msgs/Vector3``."""
     return {"x": float(x), "y": float(y), "z": float(z)}
 
 

@@ -106,6 +106,7 @@ def _zenoh(t: Table, default_config: str, allocator: bool) -> ZenohSettings | No
 
     if not t.boolean("enabled", True):
         t.allow("vessel", "config", "connect", "overrides", *(("wrench_limit",) * allocator))
+        t.allow(*ROS2_KEYS)
         return None
     path = zenoh_config_path(t, default_config)
     overrides = list(t.strings("overrides", ()))
@@ -123,7 +124,27 @@ def _zenoh(t: Table, default_config: str, allocator: bool) -> ZenohSettings | No
     if allocator:
         lx, ly, ln = t.vector("wrench_limit", 3, DEFAULT_WRENCH_LIMIT, positive=True)
         limit = (float(lx), float(ly), float(ln))
-    return ZenohSettings(t.string("vessel", "ftcap1"), path, tuple(overrides), limit)
+    ros2, domain_id, namespace = _ros2(t)
+    vessel = t.string("vessel", "ftcap1")
+    return ZenohSettings(vessel, path, tuple(overrides), limit, ros2, domain_id, namespace)
+
+
+ROS2_KEYS = ("ros2", "domain_id", "namespace")
+
+
+def _ros2(t: Table) -> tuple[bool, int, str]:
+    """``ros2`` (off by default), ``domain_id`` (0..232) and ``namespace`` of [zenoh]."""
+    from bridges.zenoh_io.ros2.graph import check_namespace
+
+    enabled = t.boolean("ros2", False)
+    domain_id = t.integer("domain_id", 0, lo=0, hi=232)
+    namespace = t.string("namespace", None) or ""
+    if namespace:
+        try:
+            check_namespace(namespace)
+        except ValueError as e:
+            raise t.error("namespace", str(e)) from None
+    return enabled, domain_id, namespace
 
 
 def _can(t: Table, m: int, allocator: bool) -> CanSettings:

@@ -63,12 +63,17 @@ class MavlinkSettings:
 class ZenohSettings:
     """``[zenoh]`` of an enabled session: the vessel name in the key expressions, the JSON5
     file and the ``KEY:VALUE`` overrides applied to it (in order); for the allocator
-    ``wrench_limit`` (setpoints with a component beyond it are dropped as malformed)."""
+    ``wrench_limit`` (setpoints with a component beyond it are dropped as malformed).
+    ``ros2``: also the ROS 2 topics as rmw_zenoh writes them, in ``domain_id`` under
+    ``namespace`` (``""``: ``/<vessel>``; docs/ros2-and-foxglove.md)."""
 
     vessel: str
     config: Path
     overrides: tuple[str, ...] = ()
     wrench_limit: tuple[float, float, float] | None = None
+    ros2: bool = False
+    domain_id: int = 0
+    namespace: str = ""
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,9 @@ fly example 1 of the paper, print the results, stop everything.
 Each part is a separate process (``ftcap-hil can-hub``, ``ftcap-hil allocator``,
 ``ftcap-hil sim``, ``ftcap-hil gcs``), all on 127.0.0.1 with free ports picked at start (UDP
 for MAVLink, TCP for the CAN hub and the Zenoh router), so a demo never collides with another
-setup on the default ports. Logs: DIR/logs/<name>.log; PIDs: DIR/logs/pids.json.
+setup on the default ports; with ``--ros2`` the router is on 7447, where rmw_zenoh's nodes
+look for it, and the allocator and vessel are also on ROS 2 topics. ``--mcap``: the ground
+station also writes DIR/<mode>/run.mcap. Logs: DIR/logs/<name>.log; PIDs: DIR/logs/pids.json.
 
 Which mission: without ``--duration`` and ``--mission``, ``paper-4.2-ex1-short`` (example 1
 with the schedule compressed: faults at 12 s and 45 s, 140 s); with ``--duration S``, the
@@ -50,6 +52,7 @@ LOCALHOST = "127.0.0.1"
 DEFAULT_MISSION = "paper-4.2-ex1-short"
 PAPER_MISSION = "paper-4.2-ex1"
 STOP_GRACE_S = 8.0
+ROS2_ROUTER_PORT = 7447  # rmw_zenoh's default router endpoint, tcp/localhost:7447
 HUB_READY = re.compile(r"can_hub listening on 127\.0\.0\.1:(\d+)")
 SUPERVISE_PERIOD_NS = 200_000_000
 
@@ -64,6 +67,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--mission", help="a mission file or shipped name (see `ftcap-hil gcs -h`)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument(
+        "--mcap", action="store_true", help="also DIR/<mode>/run.mcap (ROS 2 messages, Foxglove)"
+    )
+    p.add_argument(
+        "--ros2",
+        action="store_true",
+        help=f"allocator and vessel also on ROS 2 topics (rmw_zenoh), router on port "
+        f"{ROS2_ROUTER_PORT}",
+    )
 
 
 @dataclass
@@ -191,7 +203,7 @@ def _cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "ftcap_hil", *args]
 
 
-def allocator_argv(p: Ports) -> list[str]:
+def allocator_argv(p: Ports, ros2: bool = False) -> list[str]:
     zenoh_listen = f"['listen/endpoints:[\"tcp/{LOCALHOST}:{p.zenoh}\"]']"
     sets = [
         f"can.channel={LOCALHOST}:{p.can}",
@@ -199,21 +211,25 @@ def allocator_argv(p: Ports) -> list[str]:
         f'mavlink.peers=["{LOCALHOST}:{p.gcs}"]',
         f'mavlink.relay=["{LOCALHOST}:{p.vessel}"]',  # a ground station on one link sees both
         f"zenoh.overrides={zenoh_listen}",
+        *(["zenoh.ros2=true"] if ros2 else []),
     ]
     return _cli("allocator", *[a for s in sets for a in ("--set", s)])
 
 
-def vessel_argv(p: Ports) -> list[str]:
+def vessel_argv(p: Ports, ros2: bool = False) -> list[str]:
     sets = [
         f"can.channel={LOCALHOST}:{p.can}",
         f"mavlink.connection=udpin:{LOCALHOST}:{p.vessel}",
         f'mavlink.peers=["{LOCALHOST}:{p.allocator}", "{LOCALHOST}:{p.gcs}"]',
         f"zenoh.connect=tcp/{LOCALHOST}:{p.zenoh}",
+        *(["zenoh.ros2=true"] if ros2 else []),
     ]
     return _cli("sim", *[a for s in sets for a in ("--set", s)])
 
 
-def gcs_argv(p: Ports, mission: str, out: Path, duration: float | None, plots: bool) -> list[str]:
+def gcs_argv(
+    p: Ports, mission: str, out: Path, duration: float | None, plots: bool, mcap: bool = False
+) -> list[str]:
     argv = _cli(
         "gcs",
         "--mission",
@@ -229,7 +245,7 @@ def gcs_argv(p: Ports, mission: str, out: Path, duration: float | None, plots: b
     )
     if duration is not None:
         argv += ["--duration", repr(duration)]
-    return argv + ([] if plots else ["--no-plots"])
+    return argv + ([] if plots else ["--no-plots"]) + (["--mcap"] if mcap else [])
 
 
 def wait_for_hub(child: Child, stop: StopRequest, timeout_s: float = 15.0) -> int:
@@ -300,13 +316,15 @@ def start_all(
 ) -> Child:
     hub = sup.start("can_hub", [sys.executable, "-m", "ftcap_hil", "can-hub", "--port", "0"])
     ports = Ports.pick()
-    ports = Ports(ports.gcs, ports.allocator, ports.vessel, ports.zenoh, wait_for_hub(hub, stop))
+    zenoh = ROS2_ROUTER_PORT if args.ros2 else ports.zenoh  # where rmw_zenoh looks by default
+    ports = Ports(ports.gcs, ports.allocator, ports.vessel, zenoh, wait_for_hub(hub, stop))
     log.info("ports on %s: %s", LOCALHOST, ports)
-    sup.start("allocator", allocator_argv(ports))  # the Zenoh router: before its client
+    sup.start("allocator", allocator_argv(ports, args.ros2))  # the Zenoh router: first
     stop.check()
-    sup.start("vessel", vessel_argv(ports))
+    sup.start("vessel", vessel_argv(ports, args.ros2))
     stop.check()
-    return sup.start("gcs", gcs_argv(ports, mission, out, args.duration, not args.no_plots))
+    argv = gcs_argv(ports, mission, out, args.duration, not args.no_plots, args.mcap)
+    return sup.start("gcs", argv)
 
 
 def expected_duration(mission: str, duration: float | None) -> float:

@@ -213,8 +213,11 @@ def _log(line: LogLine) -> dict[str, Any]:
 
 
 def fault_messages(rec: RunRecord) -> list[tuple[float, FaultInjection, LogLine]]:
-    """The scenario's faults as injections (and their log lines), by run time."""
+    """The scenario's faults as injections (and their log lines), by run time; none for the
+    ``none`` reference run, which flies without them."""
     sc = rec.scenario
+    if rec.mode == Mode.NONE.value:
+        return []
     scale = sc.dt_s if sc.time_unit == "step" else 1.0
     out = []
     for inj in injection_plan(sc.faults, sc.duration_s):
@@ -283,3 +286,18 @@ def write_mcap(
             )
         writer.finish()
     return counts
+
+
+MCAP_NAME = "run.mcap"
+
+
+def write_recordings(
+    records: dict[str, RunRecord], out_dir: Path, vessel: str = "ftcap"
+) -> list[Path]:
+    """``out_dir/<mode>/run.mcap`` beside each record's ``timeseries.csv``; their paths."""
+    paths = []
+    for mode, rec in records.items():
+        path = out_dir / mode / MCAP_NAME
+        write_mcap(rec, path, vessel=vessel)
+        paths.append(path)
+    return paths

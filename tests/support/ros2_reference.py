@@ -4,16 +4,20 @@
 from their ``.msg`` files by rosbags' own parser; :func:`to_rosbags` builds rosbags'
 message object of a value (a dict as :mod:`bridges.zenoh_io.ros2.cdr` takes it), so that
 rosbags serializes it with its own field order and types; :func:`plain` turns a rosbags
-object back into plain dicts and lists for comparisons.
+object back into plain dicts and lists for comparisons; :func:`read_mcap` decodes a
+recording with the schemas it carries (the mcap package reads it, CRCs checked).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import re
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+from mcap.reader import make_reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -76,3 +80,27 @@ def plain(obj: Any) -> Any:
         fields = [f.name for f in dataclasses.fields(obj) if f.name.islower() and f.name[0] != "_"]
         return {name: plain(getattr(obj, name)) for name in fields}
     return obj.item() if isinstance(obj, np.generic) else obj
+
+
+def read_mcap(path: Path) -> dict[str, list[tuple[int, Any]]]:
+    """topic -> [(log time, rosbags object)], decoded with the file's own schemas."""
+    out: dict[str, list[tuple[int, Any]]] = {}
+    store = get_typestore(Stores.EMPTY)
+    with open(path, "rb") as fh:
+        for schema, channel, message in make_reader(fh, validate_crcs=True).iter_messages():
+            assert schema is not None and schema.encoding == "ros2msg"
+            if schema.name not in store.types:
+                store.register(schema_types(schema.name, schema.data.decode()))
+            obj = store.deserialize_cdr(message.data, schema.name)
+            out.setdefault(channel.topic, []).append((message.log_time, obj))
+    return out
+
+
+def schema_types(name: str, text: str) -> dict[str, Any]:
+    """rosbags' types of a ros2msg schema: the main .msg, then ``MSG: pkg/Name`` sections."""
+    sections = re.split(r"^={80}\nMSG: (\S+)\n", text, flags=re.M)
+    types = get_types_from_msg(sections[0], name)
+    for dep, body in zip(sections[1::2], sections[2::2], strict=True):
+        pkg, short = dep.split("/")
+        types |= get_types_from_msg(body, f"{pkg}/msg/{short}")
+    return types

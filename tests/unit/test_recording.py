@@ -9,20 +9,24 @@ import functools
 import json
 import math
 import re
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from mcap.reader import NonSeekingReader, make_reader
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.core.faults import injection_plan
-from ftcap_hil.core.status import Mode
+from ftcap_hil.core.status import AllocatorStatus, Mode
+from ftcap_hil.report.flight import FlightRecorder
 from ftcap_hil.report.recording import CHANNELS, LogLine, write_mcap
 from ftcap_hil.report.records import RunRecord, write_csv
 from ftcap_hil.runtime.offline import run_mode
+from tests.support.no_transports import env_without_transports
+from tests.support.ros2_reference import read_mcap
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -43,30 +47,6 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[dict[str
     return out / "run.mcap", rows
 
 
-def messages(path: Path) -> dict[str, list[tuple[int, Any]]]:
-    """topic -> [(log time, rosbags object)], decoded with the file's own schemas."""
-    out: dict[str, list[tuple[int, Any]]] = {}
-    store = get_typestore(Stores.EMPTY)
-    with open(path, "rb") as fh:
-        for schema, channel, message in make_reader(fh, validate_crcs=True).iter_messages():
-            assert schema is not None and schema.encoding == "ros2msg"
-            if schema.name not in store.types:
-                store.register(schema_types(schema.name, schema.data.decode()))
-            obj = store.deserialize_cdr(message.data, schema.name)
-            out.setdefault(channel.topic, []).append((message.log_time, obj))
-    return out
-
-
-def schema_types(name: str, text: str) -> dict[str, Any]:
-    """rosbags' types of a ros2msg schema: the main .msg, then ``MSG: pkg/Name`` sections."""
-    sections = re.split(r"^={80}\nMSG: (\S+)\n", text, flags=re.M)
-    types = get_types_from_msg(sections[0], name)
-    for dep, body in zip(sections[1::2], sections[2::2], strict=True):
-        pkg, short = dep.split("/")
-        types |= get_types_from_msg(body, f"{pkg}/msg/{short}")
-    return types
-
-
 def test_the_mcap_package_reads_and_validates_it(files: tuple[Path, Any]) -> None:
     path, _ = files
     with open(path, "rb") as fh:
@@ -84,7 +64,7 @@ def test_the_mcap_package_reads_and_validates_it(files: tuple[Path, Any]) -> Non
 
 
 def test_every_channel_holds_messages(files: tuple[Path, Any]) -> None:
-    got = messages(files[0])
+    got = read_mcap(files[0])
     assert sorted(got) == sorted(CHANNELS)
     n = len(record().t)
     assert all(
@@ -95,13 +75,13 @@ def test_every_channel_holds_messages(files: tuple[Path, Any]) -> None:
 
 def test_the_messages_agree_with_the_csv(files: tuple[Path, list[dict[str, float]]]) -> None:
     path, rows = files
-    got = messages(path)
+    got = read_mcap(path)
     m = record().scenario.thrusters.m
     for row, (stamp, odom), (_, cmd), (_, st), (_, dem) in zip(
         rows, got["/ftcap/odometry"], got["/ftcap/thrusters/command"],
         got["/ftcap/allocator/status"], got["/ftcap/wrench/demanded"], strict=True,
     ):  # fmt: skip
-        assert stamp == round(row["t"] * 1e9)
+        assert stamp == pytest.approx(row["t"] * 1e9, abs=1e3)  # the CSV has 9 digits
         p = odom.pose.pose
         assert (p.position.x, p.position.y) == pytest.approx((row["east"], row["north"]), rel=1e-8)
         yaw = 2 * math.atan2(p.orientation.z, p.orientation.w)
@@ -131,7 +111,7 @@ def test_the_messages_agree_with_the_csv(files: tuple[Path, list[dict[str, float
 
 
 def test_faults_and_log_lines(files: tuple[Path, Any]) -> None:
-    got = messages(files[0])
+    got = read_mcap(files[0])
     sc = record().scenario
     plan = injection_plan(sc.faults, sc.duration_s)
     faults = [(t, f.thruster, f.kind) for t, f in got["/ftcap/fault/inject"]]
@@ -154,3 +134,39 @@ def test_the_layout_shows_channels_the_recordings_have() -> None:
     assert topics and topics <= set(CHANNELS), topics - set(CHANNELS)
     panels = set(re.findall(r'"([A-Za-z0-9]+![a-z0-9]+)"', json.dumps(layout["layout"])))
     assert panels <= set(layout["configById"])
+
+
+def test_a_ground_station_record(tmp_path: Path) -> None:
+    sc = load_scenario("paper-4.2-ex1")
+    rec = FlightRecorder(sc)
+    status = AllocatorStatus.checked(
+        delta_hat=(0.9, 1.0, 1.0, 1.0), f_hat=(0.0,) * 4, delta_std=(0.05,) * 4,
+        faulty=(True, False, False, False),
+    )  # fmt: skip
+    pose = np.array([1.0, 2.0, 0.1, 0.0, 0.0, 0.0])
+    rec.add(0.0, pose, np.zeros(3), np.array([1.0, 0.0, 0.0]), None, None)  # nothing heard yet
+    rec.add(0.5, pose, np.zeros(3), np.array([1.0, 0.0, 0.0]), status, [0.1, 0.2, 0.3, 0.4])
+    counts = write_mcap(rec.finish("ftcap", 0.5), tmp_path / "run.mcap")
+    got = read_mcap(tmp_path / "run.mcap")
+    assert counts["/ftcap/allocator/status"] == len(got["/ftcap/allocator/status"]) == 2
+    first, second = (st for _, st in got["/ftcap/allocator/status"])
+    assert np.isnan(first.delta_hat).all() and second.delta_hat.tolist() == [0.9, 1.0, 1.0, 1.0]
+    assert second.faulty.tolist() == [True, False, False, False]
+    np.testing.assert_allclose(second.delta_upper, [1.0] * 4)
+    assert got["/ftcap/thrusters/command"][1][1].data.tolist() == [0.1, 0.2, 0.3, 0.4]
+
+
+def test_simulate_writes_run_mcap_without_the_transports(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "ftcap_hil", "simulate", "paper-4.1", "--mode", "ftcap",
+           "--out", str(out), "--no-plots", "--quiet", "--mcap"]  # fmt: skip
+    env = env_without_transports(tmp_path / "refuse")
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    for mode in ("none", "ftcap"):
+        got = read_mcap(out / mode / "run.mcap")
+        with open(out / mode / "timeseries.csv") as fh:
+            rows = sum(1 for _ in fh) - 1
+        assert len(got["/ftcap/allocator/status"]) == rows > 0
+        assert "/ftcap/odometry" not in got  # the linear plant has no pose
+        assert ("/ftcap/fault/inject" in got) == (mode == "ftcap")  # none flies without faults

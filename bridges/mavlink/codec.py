@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.estimation.shaft_types import HYPOTHESES_BY_CODE, HYPOTHESIS_CODES, Hypothesis
 from ftcap_hil.core.messages import Odometry
 from ftcap_hil.core.status import AllocatorStatus
 
@@ -139,6 +140,10 @@ def dialect_message(dialect: ModuleType, name: str, fields: Mapping[str, Any]) -
         unknown = sorted(fields.keys() - lengths.keys())
         raise ValueError(f"{name}: missing fields {missing}, unknown fields {unknown}")
     arrays = {k: padded(v, n, f"{name}.{k}") for k, v in fields.items() if (n := lengths[k])}
+    types = dict(zip(cls.fieldnames, cls.fieldtypes, strict=True))
+    for k, v in arrays.items():
+        if not types[k].startswith(("float", "double")):  # integer arrays: whole numbers
+            arrays[k] = [round(x) for x in v]
     return cls(**{**fields, **arrays})
 
 
@@ -166,6 +171,7 @@ def status_fields(st: AllocatorStatus, time_boot_ms: int) -> dict[str, Any]:
         "saturated": bitmask(st.saturated),
         "probing": bitmask(st.probing),
         "delta_hat_std": st.delta_std,
+        "hypothesis": tuple(HYPOTHESIS_CODES[Hypothesis(h)] for h in st.hypothesis),
     }
 
 
@@ -191,6 +197,10 @@ def status_from_fields(fields: Mapping[str, Any]) -> AllocatorStatus:
     if StatusFlag.FAULT_DETECTED in flags and not any(faulty):
         faulty = (True,) * n
     std = fields.get("delta_hat_std")
+    codes = [int(c) for c in fields.get("hypothesis", ())[:n]]
+    if any(c not in HYPOTHESES_BY_CODE for c in codes if c):
+        raise MalformedMessage(f"FTCAP_STATUS hypothesis: unknown code in {codes}")
+    hyps = () if not any(codes) else tuple(HYPOTHESES_BY_CODE[c].value for c in codes)
     return AllocatorStatus.checked(
         degraded=StatusFlag.DEGRADED in flags,
         setpoint_stale=StatusFlag.SETPOINT_STALE in flags,
@@ -203,4 +213,5 @@ def status_from_fields(fields: Mapping[str, Any]) -> AllocatorStatus:
         saturated=bits(int(fields.get("saturated", 0)), n),
         faulty=faulty,
         probing=bits(int(fields.get("probing", 0)), n),
+        hypothesis=hyps,
     )

@@ -239,6 +239,7 @@ def encode_status(status: AllocatorStatus) -> bytes:
         "malformed": s.malformed,
         "esc_rpm": [optional_float(v) for v in s.esc_rpm],
         "esc_current_A": [optional_float(v) for v in s.esc_current_a],
+        "hypothesis": list(s.hypothesis),
     }
     return dump(body)
 
@@ -295,6 +296,7 @@ def decode_status(payload: bytes | str) -> AllocatorStatus:
         telemetry_age_s=ages.get("telemetry", math.inf),
         malformed=integer(obj, "malformed") if "malformed" in obj else 0,
         esc_age_s=esc_ages if len(esc_ages) == m else (),
+        hypothesis=tuple(_strings(obj, "hypothesis")) if "hypothesis" in obj else (),
         **flags,
         **esc,
     )
@@ -345,3 +347,11 @@ def _port_flags(value: object) -> dict[str, bool]:
         raise MalformedMessage(f"stale: expected an object, got {value!r:.80}")
     named = {f"stale.{port}": flag for port, flag in value.items()}
     return {port: boolean(named, f"stale.{port}") for port in value}
+
+
+def _strings(obj: Mapping[str, Any], key: str) -> list[str]:
+    """A list of strings (its values judged by the status itself)."""
+    value = get_field(obj, key)
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise MalformedMessage(f"field {key!r}: expected a list of strings, got {value!r:.60}")
+    return value

@@ -228,13 +228,7 @@ class FtcapCore:
         motion filter is then fed the thrust the measured speeds imply, and the verdict
         joins the evidence (:meth:`Evidence.with_shaft`).
         """
-        u_sample = self.u_prev if u_sample is None else u_sample
-        if w is not None and not _finite(w):
-            w = None  # no sample: non-finite (or so large that its sum overflows)
-        if self._unsized and isinstance(w, Observation) and w.finite():
-            self._size_excitation(w.dt_s)
-        if self._lag is not None and isinstance(w, Observation):
-            u_sample = self._lag.mean_force(u_sample, w.dt_s)
+        w, u_sample = self._sample(w, self.u_prev if u_sample is None else u_sample)
         ev = Evidence.none(self.m) if evidence is None else evidence
         verdict = None
         if self.shaft is not None and t_s is not None:
@@ -264,6 +258,17 @@ class FtcapCore:
             decision=out.decision,
             shaft=verdict,
         )
+
+    def _sample(self, w: Sample | None, u_sample: FloatArray) -> tuple[Sample | None, FloatArray]:
+        """The sample the stage gets (None if non-finite, or so large its sum overflows)
+        and the command's mean over it (lagged by the thrusters' time constants)."""
+        if w is not None and not _finite(w):
+            w = None
+        if self._unsized and isinstance(w, Observation) and w.finite():
+            self._size_excitation(w.dt_s)
+        if self._lag is not None and isinstance(w, Observation):
+            u_sample = self._lag.mean_force(u_sample, w.dt_s)
+        return w, u_sample
 
     def _diagnose(
         self, feedback: Sequence[DriveReport], t_s: float, sampled: bool, u_sample: FloatArray

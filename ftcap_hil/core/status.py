@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.core.errors import MalformedMessage
+from ftcap_hil.core.estimation.shaft_types import Hypothesis
 from ftcap_hil.core.messages import ThrusterCommand
 
 
@@ -59,7 +60,9 @@ class AllocatorStatus:
     ``u`` last command (N), flags ``saturated`` (at an amplitude or rate limit), ``faulty``
     (flagged by the estimator), ``esc_failed`` (ESC silent), ``probing`` (recovery probe),
     ESC telemetry ``esc_rpm``, ``esc_current_a`` (NaN: never reported), ``esc_age_s``
-    (+inf: never). ``degraded``: the last cycle used the fallback allocation.
+    (+inf: never), ``hypothesis`` what its drive shows (:class:`Hypothesis` values:
+    ``healthy``, ``drive-dead``, ``telemetry-lost``, ...; empty: no drive diagnosis).
+    ``degraded``: the last cycle used the fallback allocation.
     """
 
     mode: Mode | None = None
@@ -87,6 +90,8 @@ class AllocatorStatus:
     esc_rpm: tuple[float, ...] = ()
     esc_current_a: tuple[float, ...] = ()
     esc_age_s: tuple[float, ...] = ()
+    # the drives' diagnosis per thruster: a Hypothesis value (core/estimation/shaft_types.py)
+    hypothesis: tuple[str, ...] = ()
 
     @classmethod
     def checked(cls, **values: Any) -> AllocatorStatus:
@@ -116,6 +121,7 @@ class AllocatorStatus:
                 raise MalformedMessage(f"status {name}: non-finite value in {norm[name]}")
         if st.mode is not None and not isinstance(st.mode, Mode):
             raise MalformedMessage(f"status mode: {st.mode!r:.40} is not a Mode")
+        norm["hypothesis"] = _hypotheses(st.hypothesis, m)
         norm |= {n: int(getattr(st, n)) for n in ("cycle", "overruns", "malformed")}
         norm |= {n: bool(getattr(st, n)) for n in _FLAGS}
         norm |= {n: float(getattr(st, n)) for n in ("setpoint_age_s", "telemetry_age_s")}
@@ -174,3 +180,17 @@ def _floats(name: str, value: object) -> tuple[float, ...]:
     # Every NaN as the one ``math.nan``: tuples compare items by identity first, so two
     # statuses with the same unknowns (an ESC never heard) compare equal.
     return tuple(math.nan if v != v else v for v in arr.tolist())
+
+
+_HYPOTHESES = frozenset(h.value for h in Hypothesis)
+
+
+def _hypotheses(values: object, m: int) -> tuple[str, ...]:
+    """The per-thruster hypotheses, each a :class:`Hypothesis` value, m of them or none."""
+    out = tuple(str(v) for v in values) if isinstance(values, tuple | list) else ()
+    if not isinstance(values, tuple | list) or len(out) not in (0, m):
+        raise MalformedMessage(f"status hypothesis: expected 0 or {m} entries, got {values!r:.60}")
+    bad = [v for v in out if v not in _HYPOTHESES]
+    if bad:
+        raise MalformedMessage(f"status hypothesis: unknown {bad[0]!r:.40}")
+    return out

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ftcap_hil.core.estimation.shaft_types import HYPOTHESIS_CODES, Hypothesis
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.plants import wrap_angle
 from ftcap_hil.core.scenario import Scenario
@@ -91,5 +92,6 @@ def _status_fields(status: AllocatorStatus | None, m: int) -> dict[str, tuple[An
         "f_hat": status.f_hat,
         "delta_std": status.delta_std,
         "faulty": status.faulty,
+        "drive": tuple(HYPOTHESIS_CODES[Hypothesis(h)] for h in status.hypothesis),
     }
     return {group: v for group, v in values.items() if len(v) == m}

@@ -18,6 +18,7 @@ import numpy as np
 
 from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CycleResult
+from ftcap_hil.core.estimation.shaft_types import HYPOTHESIS_CODES
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.models.plants import LinearPlant, wrap_angle
@@ -41,7 +42,7 @@ class RunRecord:
 
 THRUSTER_GROUPS = ("u", "tau", "delta", "f", "delta_hat", "f_hat")
 SCALARS = ("innovation", "window_len", "fallback", "probing", "solve_us")
-DECISION_GROUPS = ("faulty", "dead", "delta_std", "observable")
+DECISION_GROUPS = ("faulty", "dead", "delta_std", "observable", "drive")
 
 
 def _numbered(prefix: str, n: int) -> list[str]:
@@ -57,7 +58,9 @@ def column_groups(sc: Scenario) -> dict[str, list[str]]:
     flag, CoreConfig.fault_threshold / fault_clear), ``dead_i`` (taken out of the
     allocation: the effectiveness the allocator used was below allocator.dead_threshold,
     ``Allocation.dead``), ``delta_std_i`` (standard deviation of delta_hat_i) and
-    ``observable_i`` (the recent data determine delta_i); flags are 0 or 1."""
+    ``observable_i`` (the recent data determine delta_i), ``drive_i`` (the drives'
+    diagnosis: the hypothesis's code, ``HYPOTHESIS_CODES``; NaN without one); flags are 0
+    or 1."""
     m, k = sc.thrusters.m, sc.B.shape[0]
     linear = isinstance(sc.plant, LinearPlant)
     groups = {
@@ -168,6 +171,8 @@ def _uncertainty(res: CycleResult) -> dict[str, FloatArray | BoolArray]:
         out["delta_std"] = res.estimate.delta_std
     if res.decision is not None:
         out["observable"] = res.decision.observable
+    if res.shaft is not None:
+        out["drive"] = np.array([HYPOTHESIS_CODES[h] for h in res.shaft.hypothesis], float)
     return out
 
 

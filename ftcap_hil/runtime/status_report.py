@@ -79,6 +79,8 @@ def _uncertainty_fields(last: CycleResult | None) -> dict[str, Any]:
         fields["delta_std"] = last.estimate.delta_std
     if last.decision is not None:
         fields["observable"] = last.decision.observable
+    if last.shaft is not None:
+        fields["hypothesis"] = tuple(h.value for h in last.shaft.hypothesis)
     return fields
 
 

@@ -51,3 +51,20 @@ def test_a_dialect_message_needs_exactly_its_fields() -> None:
         dialect_message(DIALECT, "FTCAP_STATUS", {**fields, "mode": 1})
     with pytest.raises(ValueError, match=r"FTCAP_STATUS.delta_hat: at most 16"):
         dialect_message(DIALECT, "FTCAP_STATUS", {**fields, "delta_hat": [1.0] * 17})
+
+
+def test_the_drives_hypotheses_cross_the_wire_by_code() -> None:
+    status = AllocatorStatus.checked(
+        delta_hat=(1.0, 0.0, 1.0), f_hat=(0.0,) * 3,
+        hypothesis=("healthy", "jammed", "telemetry-lost"),
+    )  # fmt: skip
+    msg = dialect_message(DIALECT, "FTCAP_STATUS", status_fields(status, time_boot_ms=0))
+    mav = DIALECT.MAVLink(None, srcSystem=1, srcComponent=191)
+    wire = DIALECT.MAVLink(None).parse_buffer(msg.pack(mav))[0]
+    assert wire.hypothesis[:4] == [1, 4, 2, 0]  # 0: no diagnosis, then the enum's order
+    assert status_from_message(wire).hypothesis == status.hypothesis
+    none = AllocatorStatus.checked(delta_hat=(1.0,), f_hat=(0.0,))
+    msg = dialect_message(DIALECT, "FTCAP_STATUS", status_fields(none, time_boot_ms=0))
+    assert (
+        status_from_message(DIALECT.MAVLink(None).parse_buffer(msg.pack(mav))[0]).hypothesis == ()
+    )

@@ -57,6 +57,7 @@ def status_four_thrusters(**changes: object) -> AllocatorStatus:
         esc_rpm=(100.0, math.nan, 0.0, -50.0),
         esc_current_a=(0.5, math.nan, 0.1, 0.2),
         esc_age_s=(0.01, math.inf, 0.02, 0.03),
+        hypothesis=("healthy", "healthy", "jammed", "telemetry-lost"),
     )
     values.update(changes)
     return AllocatorStatus.checked(**values)

@@ -21,9 +21,9 @@ def test_the_columns_of_a_four_thruster_vessel() -> None:
     names = column_names(SC)
     assert names[:10] == ["t", "north", "east", "psi", "u", "v", "r", "ref_north", "ref_east",
                           "ref_psi"]  # fmt: skip
-    assert names[-16:] == [f"{g}_{i}" for g in ("faulty", "dead", "delta_std", "observable")
-                           for i in range(1, 5)]  # fmt: skip
-    assert len(names) == 1 + 6 + 3 + 3 + 3 + 6 * 4 + 3 + 5 + 4 * 4 == len(set(names))
+    groups = ("faulty", "dead", "delta_std", "observable", "drive")
+    assert names[-20:] == [f"{g}_{i}" for g in groups for i in range(1, 5)]
+    assert len(names) == 1 + 6 + 3 + 3 + 3 + 6 * 4 + 3 + 5 + 5 * 4 == len(set(names))
 
 
 def test_a_row_is_filled_by_group_and_the_rest_is_nan() -> None:

@@ -38,6 +38,7 @@ FULL: dict[str, object] = dict(
     esc_rpm=[1500.0, math.nan],
     esc_current_a=(1.25, math.nan),
     esc_age_s=np.array([0.01, math.inf]),
+    hypothesis=["healthy", "drive-dead"],
 )
 
 
@@ -51,6 +52,14 @@ def test_checked_keeps_every_field_as_plain_tuples() -> None:
     assert st.cycle == 7 and type(st.cycle) is int and st.degraded is True
     assert st.mode is Mode.FTCAP and st.malformed == 3 and st.telemetry_age_s == math.inf
     assert math.isnan(st.delta_std[1]) and math.isnan(st.esc_rpm[1])
+    assert st.hypothesis == ("healthy", "drive-dead")
+
+
+def test_a_hypothesis_must_be_a_known_one_per_thruster() -> None:
+    with pytest.raises(MalformedMessage, match="hypothesis: unknown 'dead'"):
+        AllocatorStatus.checked(**{**FULL, "hypothesis": ["healthy", "dead"]})
+    with pytest.raises(MalformedMessage, match="hypothesis: expected 0 or 2"):
+        AllocatorStatus.checked(**{**FULL, "hypothesis": ["healthy"]})
 
 
 def test_checked_of_nothing_is_the_default_status() -> None:

@@ -29,6 +29,10 @@ class Hypothesis(enum.Enum):
 
 
 # What the allocator may act on: a removal or a partial loss needs one of these.
+# Wire codes (MAVLink, CSV): 0 means no drive diagnosis, then the hypotheses in order.
+HYPOTHESIS_CODES = {h: i + 1 for i, h in enumerate(Hypothesis)}
+HYPOTHESES_BY_CODE = {i: h for h, i in HYPOTHESIS_CODES.items()}
+
 ACTIONABLE = frozenset(
     {Hypothesis.DRIVE_DEAD, Hypothesis.JAMMED, Hypothesis.STUCK, Hypothesis.WEAK,
      Hypothesis.LOAD_LOSS, Hypothesis.LOAD_GAIN}

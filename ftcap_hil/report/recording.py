@@ -31,6 +31,7 @@ from bridges.zenoh_io.ros2 import cdr
 from bridges.zenoh_io.ros2 import messages as ros2
 from bridges.zenoh_io.ros2.diagnostics import diagnostic_array
 from bridges.zenoh_io.ros2.std_types import registry
+from ftcap_hil.core.estimation.shaft_types import HYPOTHESES_BY_CODE
 from ftcap_hil.core.faults import injection_plan
 from ftcap_hil.core.messages import FaultInjection, FloatArray, Odometry
 from ftcap_hil.core.status import AllocatorStatus, Mode
@@ -102,6 +103,13 @@ def _finite(values: list[float]) -> list[float]:
     return values if values and all(math.isfinite(v) for v in values) else []
 
 
+def _drives(codes: list[float]) -> tuple[str, ...]:
+    """The drives' hypotheses of a row's ``drive_i`` codes (none if a code is NaN)."""
+    if not _finite(codes):
+        return ()
+    return tuple(HYPOTHESES_BY_CODE[int(c)].value for c in codes)
+
+
 def _status(cols: _Columns, row: int, mode: str) -> tuple[AllocatorStatus, list[bool]]:
     """The allocator's status of a row, and its ``dead`` flags."""
     dem, ach = cols.group("v_dem", row, cols.k), cols.group("v_ach", row, cols.k)
@@ -120,6 +128,7 @@ def _status(cols: _Columns, row: int, mode: str) -> tuple[AllocatorStatus, list[
         tau_demand=tuple(dem) if cols.k == 3 else (),
         unallocated=tuple(np.subtract(dem, ach).tolist()) if cols.k == 3 else (),
         faulty=tuple(cols.flags("faulty", row)),
+        hypothesis=_drives(cols.group("drive", row)),
     )
     return status, cols.flags("dead", row)
 

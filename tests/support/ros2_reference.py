@@ -54,7 +54,7 @@ def to_rosbags(type_name: str, value: dict[str, Any]) -> Any:
         elif f.base in PRIMITIVES and (f.sequence or f.array):
             kwargs[f.name] = np.array(v, dtype=_NUMPY[f.base])
         elif f.base == STRING:
-            kwargs[f.name] = str(v)
+            kwargs[f.name] = [str(x) for x in v] if (f.sequence or f.array) else str(v)
         else:
             kwargs[f.name] = v
     return store.types[type_name](**kwargs)

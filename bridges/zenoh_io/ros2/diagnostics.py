@@ -6,10 +6,11 @@ Per thruster ``i`` (1-based in the name, as on the ground station): name
 silent, WARN when the estimator flags it, else OK; the values (text, as the message type
 has it) ``delta_hat``, ``delta_std``, ``delta_lower``, ``delta_upper`` (delta_hat -+ 2 std
 within [0, 1]), ``observable``, ``faulty``, ``saturated``, ``esc_failed``, ``probing``,
-``f_hat_N``, ``u_N``, ``esc_rpm``, ``esc_current_A``: each only where the status carries
-it. The allocator's entry (``ftcap <vessel>: allocator``) is WARN when the last cycle was
-degraded or an input is stale, and carries mode, cycle, overruns, malformed and the
-unallocated wrench (body FRD, as the project's JSON). Pure: no zenoh import.
+``f_hat_N``, ``u_N``, ``esc_rpm``, ``esc_current_A``, ``drive`` (the drive's diagnosis): each
+only where the status carries it. The allocator's entry (``ftcap <vessel>: allocator``) is
+WARN when the last cycle was degraded or an input is stale, and carries mode, cycle,
+overruns, malformed and the unallocated wrench (body FRD, as the project's JSON). Pure: no
+zenoh import.
 """
 
 from __future__ import annotations
@@ -31,13 +32,15 @@ class Level(enum.IntEnum):
     STALE = 3
 
 
-def _text(value: float | bool) -> str:
+def _text(value: float | bool | str) -> str:
+    if isinstance(value, str):
+        return value
     if isinstance(value, bool):
         return "true" if value else "false"
     return "nan" if math.isnan(value) else f"{value:.6g}"
 
 
-def _pairs(named: dict[str, Sequence[float] | Sequence[bool]], i: int) -> list[Msg]:
+def _pairs(named: dict[str, Sequence[float] | Sequence[bool] | Sequence[str]], i: int) -> list[Msg]:
     return [
         {"key": key, "value": _text(values[i])} for key, values in named.items() if len(values) > i
     ]
@@ -48,7 +51,7 @@ def _thruster(st: AllocatorStatus, vessel: str, i: int, band: tuple[list[float],
     faulty = len(st.faulty) > i and st.faulty[i]
     level = Level.ERROR if esc_failed else Level.WARN if faulty else Level.OK
     message = "ESC silent" if esc_failed else "fault flagged" if faulty else "healthy"
-    named: dict[str, Sequence[float] | Sequence[bool]] = {
+    named: dict[str, Sequence[float] | Sequence[bool] | Sequence[str]] = {
         "delta_hat": st.delta_hat,
         "delta_std": st.delta_std,
         "delta_lower": band[0],
@@ -62,6 +65,7 @@ def _thruster(st: AllocatorStatus, vessel: str, i: int, band: tuple[list[float],
         "u_N": st.u,
         "esc_rpm": st.esc_rpm,
         "esc_current_A": st.esc_current_a,
+        "drive": st.hypothesis,
     }
     return {
         "level": int(level),

@@ -199,4 +199,5 @@ def allocator_status_msg(st: AllocatorStatus, t_s: float, dead: Sequence[bool] =
         "dead": [bool(b) for b in dead],
         "esc_failed": [bool(b) for b in st.esc_failed],
         "probing": [bool(b) for b in st.probing],
+        "drive": [str(h) for h in st.hypothesis],
     }

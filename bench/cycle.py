@@ -25,6 +25,7 @@ import numpy as np
 
 from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.core.cycle import FtcapCore
+from ftcap_hil.core.estimation.config import EstimatorKind
 from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.status import Mode
@@ -65,7 +66,7 @@ def make_core(sc, mode: Mode, kind: str, backend: str) -> FtcapCore:  # type: ig
     cfg = dataclasses.replace(
         sc.core,
         mode=mode,
-        estimator=dataclasses.replace(sc.core.estimator, kind=kind),
+        estimator=dataclasses.replace(sc.core.estimator, kind=EstimatorKind(kind)),
         allocator=dataclasses.replace(sc.core.allocator, backend=backend),
     )
     return FtcapCore(sc.B, sc.thrusters, sc.dt_s, cfg, sc.plant)

@@ -8,6 +8,8 @@ from __future__ import annotations
 import dataclasses
 
 from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.core.models.plants import Inversion
+from ftcap_hil.core.scenario import Integrator
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import results
 from ftcap_hil.runtime.offline import run_modes
@@ -32,8 +34,8 @@ def main() -> None:
     for name, integ, inv in RUNS:
         sc = load_scenario(name)
         if integ:
-            plant = dataclasses.replace(sc.plant, inversion=inv)
-            sc = dataclasses.replace(sc, integrator=integ, plant=plant)
+            plant = dataclasses.replace(sc.plant, inversion=Inversion(inv))
+            sc = dataclasses.replace(sc, integrator=Integrator(integ), plant=plant)
         res = results(run_modes(sc, list(Mode)))
         print(f"## {name}" + (f" ({integ} truth, {inv} inversion)" if integ else ""))
         print()

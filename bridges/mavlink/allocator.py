@@ -61,10 +61,10 @@ from bridges.mavlink.codec import (
 from bridges.mavlink.commands import CommandService
 from bridges.mavlink.config import (
     VESSEL_IDS,
-    LinkConfigError,
     MavlinkEndpoint,
     default_allocator_endpoint,
 )
+from bridges.mavlink.errors import LinkConfigError
 from bridges.mavlink.esc import EscInfoClock, send_standard_esc
 from bridges.mavlink.link import MavlinkPort, PortOwner, Route
 from bridges.mavlink.params import ParamServer, ParamService, ParamSpec

@@ -48,7 +48,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ftcap_hil.core.errors import ConfigError
+from bridges.mavlink.errors import LinkConfigError
+from bridges.mavlink.geodesy import GeodeticOrigin
 
 LOCALHOST = "127.0.0.1"
 GCS_PORT = 14550
@@ -57,10 +58,6 @@ ALLOCATOR_PORT = 14570
 VESSEL_IDS = (1, 1)  # MAV_COMP_ID_AUTOPILOT1
 ALLOCATOR_IDS = (1, 191)  # MAV_COMP_ID_ONBOARD_COMPUTER
 GCS_IDS = (255, 190)  # MAV_COMP_ID_MISSIONPLANNER
-
-
-class LinkConfigError(ConfigError):
-    """A MAVLink endpoint is misconfigured (raised at start-up, names the key and value)."""
 
 
 def parse_host_port(key: str, value: str) -> tuple[str, int]:
@@ -144,8 +141,6 @@ class MavlinkEndpoint:
                 f"bind_all_interfaces: expected true or false, got {self.bind_all_interfaces!r}"
             )
         if self.geodetic_origin is not None:
-            from bridges.mavlink.geodesy import GeodeticOrigin  # it imports LinkConfigError
-
             GeodeticOrigin.from_value(self.geodetic_origin)
         if bind_host(self.connection) in _ALL_INTERFACES and not self.bind_all_interfaces:
             raise LinkConfigError(

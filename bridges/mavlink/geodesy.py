@@ -19,7 +19,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from bridges.mavlink.config import LinkConfigError
+from bridges.mavlink.errors import LinkConfigError
 
 WGS84_A_M = 6_378_137.0
 WGS84_E2 = 6.694_379_990_14e-3  # first eccentricity squared

@@ -35,7 +35,8 @@ from pymavlink import mavutil  # noqa: E402  (must follow the MAVLINK20 switch)
 
 from bridges.mavlink import dialect as mavlink_dialect  # noqa: E402
 from bridges.mavlink.codec import Severity, SystemStatus  # noqa: E402
-from bridges.mavlink.config import GCS_IDS, LinkConfigError, MavlinkEndpoint  # noqa: E402
+from bridges.mavlink.config import GCS_IDS, MavlinkEndpoint  # noqa: E402
+from bridges.mavlink.errors import LinkConfigError  # noqa: E402
 from bridges.mavlink.gate import InboxGate, PortStats  # noqa: E402
 from bridges.mavlink.peers import Address, PeerTable, TrafficLimits  # noqa: E402
 from bridges.mavlink.signing import SignatureVerifier, load_signing_key, signing_timestamp  # noqa: E402

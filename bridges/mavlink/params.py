@@ -43,7 +43,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from bridges.mavlink.codec import Severity
-from bridges.mavlink.config import LinkConfigError
+from bridges.mavlink.errors import LinkConfigError
 from bridges.mavlink.link import MavlinkPort, Route
 
 _NAME = re.compile(r"^[A-Z][A-Z0-9_]{0,15}$")

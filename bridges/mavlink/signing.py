@@ -28,7 +28,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bridges.mavlink.config import LinkConfigError
+from bridges.mavlink.errors import LinkConfigError
 
 SIGNATURE_LEN = 13  # link id (1) + timestamp (6) + signature (6)
 IFLAG_SIGNED = 0x01

@@ -20,7 +20,8 @@ import socket
 from collections.abc import Sequence
 from typing import Any
 
-from bridges.mavlink.config import LinkConfigError, parse_host_port
+from bridges.mavlink.config import parse_host_port
+from bridges.mavlink.errors import LinkConfigError
 from bridges.mavlink.peers import Address, PeerTable, TrafficLimits
 
 logger = logging.getLogger(__name__)

@@ -41,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _prepare(args: argparse.Namespace) -> tuple[CampaignSpec, CampaignPlan]:
     from ftcap_hil.config.campaign import load_campaign
-    from ftcap_hil.config.campaign_plan import plan_campaign
+    from ftcap_hil.runtime.campaign_plan import plan_campaign
 
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers: need >= 1, got {args.workers}")

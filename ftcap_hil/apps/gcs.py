@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from ftcap_hil.apps.options import add_set_option
-from ftcap_hil.config.mission import load_mission, shipped_missions
+from ftcap_hil.config.mission import Mission, load_mission, shipped_missions
 from ftcap_hil.core.errors import ConfigError, ExitCode, FtcapError
 from ftcap_hil.report.flight import NOT_ON_MAVLINK, FlightRecorder
 from ftcap_hil.report.records import RunRecord
@@ -38,8 +38,8 @@ from ftcap_hil.runtime.ground_station import (
     Flight,
     GroundStation,
     GroundStationError,
-    Mission,
     StatusLine,
+    flight_plan,
 )
 from ftcap_hil.runtime.signals import capture_signals
 
@@ -108,7 +108,7 @@ def fly_mission(args: argparse.Namespace, mission: Mission, out: Path) -> int:
     """Connect, fly, wind down, write the record; the exit code."""
     from bridges.mavlink.gcs import MavlinkGcsLink
 
-    plan = mission.flight_plan()
+    plan = flight_plan(mission)
     inject = bool(plan.injections)
     started = time.monotonic()
     error: GroundStationError | None = None

@@ -15,7 +15,9 @@ from pathlib import Path
 
 from ftcap_hil.config.scenario import load_scenario, shipped_scenarios
 from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.models.plants import Inversion, SurfaceVessel
+from ftcap_hil.core.models.vessel3dof import Vessel3DOF
+from ftcap_hil.core.scenario import Integrator, Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.summary import offline_summary_lines
 
@@ -33,11 +35,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     group.add_argument("--compare", action="store_true", help="all modes (the default)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument(
-        "--integrator", choices=["euler", "rk4"], help="override the scenario's true plant"
+        "--integrator",
+        choices=[i.value for i in Integrator],
+        help="override the scenario's true plant",
     )
     p.add_argument(
         "--inversion",
-        choices=["euler", "trapezoid"],
+        choices=[i.value for i in Inversion],
         help="vessel: how the estimator inverts a step",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
@@ -52,11 +56,11 @@ def _scenario(args: argparse.Namespace) -> Scenario:
     try:
         sc = load_scenario(args.scenario)
         if args.integrator:
-            sc = dataclasses.replace(sc, integrator=args.integrator)
+            sc = dataclasses.replace(sc, integrator=Integrator(args.integrator))
         if args.inversion:
-            if not hasattr(sc.plant, "inversion"):
+            if not isinstance(sc.plant, SurfaceVessel | Vessel3DOF):
                 raise ConfigError("--inversion applies to the vessel plant only")
-            plant = dataclasses.replace(sc.plant, inversion=args.inversion)
+            plant = dataclasses.replace(sc.plant, inversion=Inversion(args.inversion))
             sc = dataclasses.replace(sc, plant=plant)
     except ConfigError:
         raise

@@ -1,5 +1,7 @@
 """The bridge tables of the allocator's and the vessel's files: ``[can]``, ``[mavlink]``,
-``[zenoh]`` -> :class:`~ftcap_hil.runtime.port_settings.PortSettings`.
+``[zenoh]`` -> :class:`PortSettings`, what a process needs to open its ports (plain values:
+the bridges are opened from them by the command that runs the process). A key left out
+takes the settings type's default, written there only.
 
 Same keys in both files except where the role differs: the allocator's ``[can]`` has
 ``node_id`` (its own node), ``node_name``, ``esc_monitor`` and the ESC command stream's
@@ -15,17 +17,14 @@ shipped one (``allocator``, ``vessel``, ``gcs``), checked when the session opens
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ftcap_hil.config.table_dataclass import defaults_of
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.thruster_curves import curves_from
-from ftcap_hil.runtime.port_settings import (
-    CanSettings,
-    MavlinkSettings,
-    PortSettings,
-    ZenohSettings,
-)
+from ftcap_hil.core.effectiveness.thruster_curve import ThrusterCurve
 
 if TYPE_CHECKING:
     from bridges.mavlink.config import MavlinkEndpoint
@@ -38,6 +37,76 @@ NODE_IDS = (1, 127)  # DroneCAN node IDs (0 is anonymous)
 DEFAULT_WRENCH_LIMIT = (1000.0, 1000.0, 1000.0)
 
 
+@dataclass(frozen=True)
+class CanSettings:
+    """``[can]``: the bus and the DroneCAN node IDs on it.
+
+    ``node_id`` is the allocator's node (the allocator sends from it, the vessel accepts
+    RawCommand from it only); ``esc_node_ids[i]`` is ESC i's node (None: the allocator
+    accepts esc.Status from any node). ``deadband_n``: forces with ``|u|`` at most this (N)
+    are sent as raw 0. ``esc_monitor`` (allocator): watch esc.Status; ``start_hub``
+    (vessel): also run the ``canhub`` on ``channel``.
+
+    ``curves``: one thruster curve per thruster (force <-> command), None for the linear
+    map: on the allocator's side the curve it encodes with, on the vessel's the physical one
+    its ESCs decode with. Allocator only: the ESC command stream's rate ``esc_rate_hz``
+    (1..400 Hz; 0: no stream, one command per cycle), ``esc_hold_s`` (no allocation for
+    this long: zero; at least 2.5 of the daemon's periods) and ``esc_command_timeout_s``
+    (the ESCs' own timeout: no command on the bus for this long and they are at zero, the
+    allocator restarts from zero); ``node_name``, what GetNodeInfo answers.
+    """
+
+    interface: str = "canhub"
+    channel: str = "127.0.0.1:29536"
+    node_id: int = 10
+    esc_node_ids: tuple[int, ...] | None = None
+    deadband_n: float = 0.0
+    esc_monitor: bool = True
+    start_hub: bool = False
+    curves: tuple[ThrusterCurve, ...] | None = None
+    esc_rate_hz: float = 100.0
+    esc_hold_s: float = 1.0
+    esc_command_timeout_s: float = 0.2
+    node_name: str = "org.ftcap.allocator"
+
+
+@dataclass(frozen=True)
+class MavlinkSettings:
+    """``[mavlink]`` of an enabled link: where it binds and whom it sends to; for the
+    allocator also ``max_wrench`` (MANUAL_CONTROL full deflection [X N, Y N, N N*m]) and
+    ``wrench_limit`` (WRENCH_SETPOINT components beyond are dropped as malformed)."""
+
+    endpoint: MavlinkEndpoint
+    max_wrench: tuple[float, float, float] = (0.3, 0.3, 0.06)
+    wrench_limit: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True)
+class ZenohSettings:
+    """``[zenoh]`` of an enabled session: the vessel name in the key expressions, the JSON5
+    file and the ``KEY:VALUE`` overrides applied to it (in order); for the allocator
+    ``wrench_limit`` (setpoints with a component beyond it are dropped as malformed).
+    ``ros2``: also the ROS 2 topics as rmw_zenoh writes them, in ``domain_id`` under
+    ``namespace`` (``""``: ``/<vessel>``; docs/ros2-and-foxglove.md)."""
+
+    config: Path
+    vessel: str = "ftcap1"
+    overrides: tuple[str, ...] = ()
+    wrench_limit: tuple[float, float, float] | None = None
+    ros2: bool = False
+    domain_id: int = 0
+    namespace: str = ""
+
+
+@dataclass(frozen=True)
+class PortSettings:
+    """Every port of one process; ``mavlink`` / ``zenoh`` None: that bridge is disabled."""
+
+    can: CanSettings
+    mavlink: MavlinkSettings | None
+    zenoh: ZenohSettings | None
+
+
 ENDPOINT_KEYS = (
     "connection", "peers", "system_id", "component_id", "relay", "key_file",
     "authorized_systems", "bind_all_interfaces", "geodetic_origin",
@@ -47,7 +116,8 @@ ENDPOINT_KEYS = (
 def mavlink_endpoint_from(t: Table, default: MavlinkEndpoint) -> MavlinkEndpoint:
     """``connection``, ``peers``, ``system_id``, ``component_id``, ``relay``, ``key_file``,
     ``authorized_systems``, ``bind_all_interfaces``, ``geodetic_origin`` over ``default``."""
-    from bridges.mavlink.config import LinkConfigError, MavlinkEndpoint
+    from bridges.mavlink.config import MavlinkEndpoint
+    from bridges.mavlink.errors import LinkConfigError
 
     authorized = default.authorized_systems
     if t.has("authorized_systems"):
@@ -81,7 +151,9 @@ def _mavlink(t: Table, allocator: bool) -> MavlinkSettings | None:
     if not allocator:
         return MavlinkSettings(mavlink_endpoint_from(t, default_vessel_endpoint()))
     endpoint = mavlink_endpoint_from(t, default_allocator_endpoint())
-    mx, my, mn = t.vector("max_wrench", 3, (0.3, 0.3, 0.06), positive=True)
+    mx, my, mn = t.vector(
+        "max_wrench", 3, defaults_of(MavlinkSettings)["max_wrench"], positive=True
+    )
     limit = t.vector("wrench_limit", 3, positive=True) if t.has("wrench_limit") else None
     t.allow("wrench_limit")
     triple = None if limit is None else (float(limit[0]), float(limit[1]), float(limit[2]))
@@ -125,8 +197,8 @@ def _zenoh(t: Table, default_config: str, allocator: bool) -> ZenohSettings | No
         lx, ly, ln = t.vector("wrench_limit", 3, DEFAULT_WRENCH_LIMIT, positive=True)
         limit = (float(lx), float(ly), float(ln))
     ros2, domain_id, namespace = _ros2(t)
-    vessel = t.string("vessel", "ftcap1")
-    return ZenohSettings(vessel, path, tuple(overrides), limit, ros2, domain_id, namespace)
+    vessel = t.string("vessel", defaults_of(ZenohSettings)["vessel"])
+    return ZenohSettings(path, vessel, tuple(overrides), limit, ros2, domain_id, namespace)
 
 
 ROS2_KEYS = ("ros2", "domain_id", "namespace")
@@ -136,8 +208,9 @@ def _ros2(t: Table) -> tuple[bool, int, str]:
     """``ros2`` (off by default), ``domain_id`` (0..232) and ``namespace`` of [zenoh]."""
     from bridges.zenoh_io.ros2.graph import check_namespace
 
-    enabled = t.boolean("ros2", False)
-    domain_id = t.integer("domain_id", 0, lo=0, hi=232)
+    d = defaults_of(ZenohSettings)
+    enabled = t.boolean("ros2", d["ros2"])
+    domain_id = t.integer("domain_id", d["domain_id"], lo=0, hi=232)
     namespace = t.string("namespace", None) or ""
     if namespace:
         try:
@@ -149,17 +222,18 @@ def _ros2(t: Table) -> tuple[bool, int, str]:
 
 def _can(t: Table, m: int, allocator: bool) -> CanSettings:
     lo, hi = NODE_IDS
-    interface = t.string("interface", "canhub")
+    d = defaults_of(CanSettings)
+    interface = t.string("interface", d["interface"])
     extra: dict[str, Any]
     if allocator:
-        node = t.integer("node_id", 10, lo=lo, hi=hi)
+        node = t.integer("node_id", d["node_id"], lo=lo, hi=hi)
         ids = t.integers("esc_node_ids", m, lo=lo, hi=hi) if t.has("esc_node_ids") else None
         t.allow("esc_node_ids")
-        extra = {"esc_monitor": t.boolean("esc_monitor", True), **_esc_stream(t)}
+        extra = {"esc_monitor": t.boolean("esc_monitor", d["esc_monitor"]), **_esc_stream(t, d)}
     else:
-        node = t.integer("allocator_node_id", 10, lo=lo, hi=hi)
+        node = t.integer("allocator_node_id", d["node_id"], lo=lo, hi=hi)
         ids = t.integers("esc_node_ids", m, [20 + i for i in range(m)], lo=lo, hi=hi)
-        extra = {"start_hub": t.boolean("start_hub", False)}
+        extra = {"start_hub": t.boolean("start_hub", d["start_hub"])}
         if extra["start_hub"] and interface != "canhub":
             raise t.error("start_hub", f"true needs interface 'canhub', got {interface!r}")
     if ids is not None and len(set(ids)) != len(ids):
@@ -167,28 +241,28 @@ def _can(t: Table, m: int, allocator: bool) -> CanSettings:
     t.allow("curve_thrust_max_n")
     return CanSettings(
         interface=interface,
-        channel=t.string("channel", "127.0.0.1:29536"),
+        channel=t.string("channel", d["channel"]),
         node_id=node,
         esc_node_ids=ids,
-        deadband_n=t.number("deadband_n", 0.0, lo=0.0),
+        deadband_n=t.number("deadband_n", d["deadband_n"], lo=0.0),
         curves=curves_from(t, m),
         **extra,
     )
 
 
-def _esc_stream(t: Table) -> dict[str, Any]:
-    """The allocator's ESC command stream and node keys (``CanSettings``)."""
+def _esc_stream(t: Table, d: dict[str, Any]) -> dict[str, Any]:
+    """The allocator's ESC command stream and node keys over ``d``, CanSettings' defaults."""
     from bridges.can_io.esc_stream import check_rate
 
-    rate = t.number("esc_rate_hz", 100.0, lo=0.0)  # 0: no stream, one command per cycle
-    hold = t.number("esc_hold_s", 1.0, positive=True)
-    timeout = t.number("esc_command_timeout_s", 0.2, positive=True)
+    rate = t.number("esc_rate_hz", d["esc_rate_hz"], lo=0.0)  # 0: no stream, one per cycle
+    hold = t.number("esc_hold_s", d["esc_hold_s"], positive=True)
+    timeout = t.number("esc_command_timeout_s", d["esc_command_timeout_s"], positive=True)
     try:
         if rate != 0.0:
             check_rate(rate, hold, timeout)
     except ValueError as e:
         raise t.error(None, str(e)) from e
-    name = t.string("node_name", "org.ftcap.allocator")
+    name = t.string("node_name", d["node_name"])
     if not 1 <= len(name) <= 80 or not name.isascii():
         raise t.error("node_name", f"expected 1..80 ASCII characters, got {name!r}")
     return {"esc_rate_hz": rate, "esc_hold_s": hold, "esc_command_timeout_s": timeout,

@@ -9,21 +9,74 @@ built.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.config.table_dataclass import read_dataclass
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.status import Mode
-from ftcap_hil.report.campaign_metrics import MetricParams
 
 SHIPPED = "ftcap_hil.data.campaigns"
-FAULT_KINDS = ("dead", "stuck", "partial", "bias", "intermittent")
 PLAIN_MODES = {m.value: m for m in Mode if m is not Mode.NONE}
 VARIANT_TABLES = ("estimator", "excitation", "allocator")
-FAULT_SOURCES = ("scenario", "random", "none")
 Range = tuple[float, float]
+
+
+class FaultSource(enum.Enum):
+    """Where a ``[[scenario]]`` entry's faults come from (``faults = ...``)."""
+
+    SCENARIO = "scenario"  # the file's own [[fault]] schedule
+    RANDOM = "random"  # drawn from [faults]
+    NONE = "none"  # none: healthy runs
+
+
+class DrawnKind(enum.Enum):
+    """The kinds of fault the campaign's generator draws (``[faults] kinds``); the values
+    are the kind labels of the results."""
+
+    DEAD = "dead"
+    STUCK = "stuck"
+    PARTIAL = "partial"
+    BIAS = "bias"
+    INTERMITTENT = "intermittent"
+
+
+class HarmStatistic(enum.Enum):
+    """Which statistic of a phase's deviation from the fault-free run judges harm."""
+
+    MAX = "max"
+    RMS = "rms"
+
+
+@dataclass(frozen=True)
+class MetricParams:
+    """The metrics' parameters (``[metrics]`` of a campaign file); times in s."""
+
+    convergence_tol: float = 0.1  # |delta_hat - delta| counted as "estimated"
+    converge_hold_s: float = 2.0  # ... held this long
+    used_fraction: float = 0.1  # |u| >= this x range: the thruster is "used"
+    used_window_s: float = 5.0  # "used" judged over this long after the onset
+    tail_fraction: float = 0.25  # last part of an episode for errors and isolation
+    isolation_hold: float = 0.9  # share of the tail isolated for "correct isolation"
+    recovery_hold_s: float = 2.0  # back in the allocation for this long
+    harm_ratio: float = 1.05  # harm: deviation > max(harm_ratio x CAP's, ...
+    harm_length_fraction: float = 0.01  # ... this x the vessel's length)
+    harm_statistic: HarmStatistic = HarmStatistic.MAX  # per phase, of the deviation
+
+    def __post_init__(self) -> None:
+        for name in ("convergence_tol", "converge_hold_s", "used_window_s", "recovery_hold_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name}: must be > 0, got {getattr(self, name)}")
+        for name in ("used_fraction", "tail_fraction", "isolation_hold"):
+            if not 0 < getattr(self, name) <= 1:
+                raise ValueError(f"{name}: need (0, 1], got {getattr(self, name)}")
+        if not self.harm_ratio >= 1 or not self.harm_length_fraction >= 0:
+            raise ValueError("harm_ratio must be >= 1 and harm_length_fraction >= 0")
+        if not isinstance(self.harm_statistic, HarmStatistic):
+            raise ValueError(f"harm_statistic: a HarmStatistic, got {self.harm_statistic!r}")
 
 
 @dataclass(frozen=True)
@@ -32,7 +85,7 @@ class ScenarioEntry:
 
     source: str
     label: str
-    faults: str  # "scenario" (as in the file), "random" (from [faults]) or "none"
+    faults: FaultSource
     overrides: dict[str, Any]  # deep-merged into the scenario document ([scenario.set])
     duration_s: float | None
     length_m: float | None
@@ -52,7 +105,7 @@ class FaultSpec:
     """``[faults]``: the random fault generator's ranges (uniform draws); times in s,
     bias and stuck forces as fractions of the thruster's range."""
 
-    kinds: tuple[str, ...] = FAULT_KINDS
+    kinds: tuple[DrawnKind, ...] = tuple(DrawnKind)
     each_kind: bool = True  # one case per kind and seed (else the kind is drawn too)
     count: int = 1  # faults per run, on different thrusters
     onset: Range = (10.0, 20.0)
@@ -132,7 +185,7 @@ def _scenario(t: Table) -> ScenarioEntry:
     return ScenarioEntry(
         source,
         label,
-        t.choice("faults", FAULT_SOURCES, "scenario"),
+        t.enum("faults", FaultSource, FaultSource.SCENARIO),
         _free_table(t, "set"),
         t.number("duration", None, positive=True),
         t.number("length_m", None, positive=True),
@@ -174,16 +227,17 @@ RANGES += ("intermittent_on", "intermittent_off")
 
 def _faults(t: Table) -> FaultSpec:
     d = FaultSpec()
-    kinds = t.strings("kinds", d.kinds)
-    if not kinds or not set(kinds) <= set(FAULT_KINDS):
-        raise t.error("kinds", f"expected a list from {list(FAULT_KINDS)}, got {list(kinds)}")
+    names = [k.value for k in DrawnKind]
+    kinds = t.strings("kinds", [k.value for k in d.kinds])
+    if not kinds or not set(kinds) <= set(names):
+        raise t.error("kinds", f"expected a list from {names}, got {list(kinds)}")
     ranges = {name: _range(t, name, getattr(d, name)) for name in RANGES}
     if ranges["partial_delta"] is not None and ranges["partial_delta"][1] >= 1.0:
         raise t.error("partial_delta", f"must stay below 1, got {list(ranges['partial_delta'])}")
     thrusters = _distinct(t, "thrusters", 1) if t.has("thrusters") else None
     t.allow("thrusters")
     return FaultSpec(
-        kinds=tuple(dict.fromkeys(kinds)),
+        kinds=tuple(DrawnKind(k) for k in dict.fromkeys(kinds)),
         each_kind=t.boolean("each_kind", d.each_kind),
         count=t.integer("count", d.count, lo=1),
         thrusters=None if thrusters is None else tuple(i - 1 for i in thrusters),
@@ -218,9 +272,7 @@ def campaign_from(root: Table, base: Path | None = None) -> CampaignSpec:
         faults=_faults(root.table("faults")),
         healthy=healthy,
         duration_s=head.number("duration", None, positive=True),
-        metrics=root.table("metrics").dataclass(
-            MetricParams, choices={"harm_statistic": ("max", "rms")}
-        ),
+        metrics=read_dataclass(root.table("metrics"), MetricParams),
         base=base,
     )
 

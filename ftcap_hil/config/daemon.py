@@ -4,25 +4,75 @@ Sections: ``[daemon]`` (loop, watchdogs, mode), ``[vessel]`` and ``[plant]``, ``
 ``[allocator]``, ``[excitation]`` (core tunables: the same tables as in scenario files; the
 former name ``[allocation]`` is refused with the new one), and one table per bridge:
 ``[mavlink]``, ``[zenoh]``, ``[can]`` (``config.bridges``). Every table and key is checked.
-The shipped defaults are ``ftcap_hil/data/hil/allocator.toml``.
+A key left out takes the default of :class:`DaemonConfig` (or :class:`OdometryLimits`),
+written there only; the shipped file is ``ftcap_hil/data/hil/allocator.toml``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
-from ftcap_hil.config.bridges import allocator_ports_from
-from ftcap_hil.config.scenario import core_config_from
+from ftcap_hil.config.bridges import PortSettings, allocator_ports_from
+from ftcap_hil.config.scenario_tables import core_config_from
+from ftcap_hil.config.table_dataclass import defaults_of
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.thruster_curves import limited_to_curves
 from ftcap_hil.config.toml import HIL_DATA, read_toml
 from ftcap_hil.config.vessel import surface_vessel_from
+from ftcap_hil.core.cycle import CoreConfig
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet
+from ftcap_hil.core.messages import FloatArray
+from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.core.status import Mode
-from ftcap_hil.runtime.daemon import DaemonConfig
-from ftcap_hil.runtime.estimation import OdometryLimits
-from ftcap_hil.runtime.port_settings import PortSettings
+
+
+class OdometryLimits(NamedTuple):
+    """What the vessel can do: telemetry beyond it is implausible
+    (:class:`~ftcap_hil.runtime.estimation.PlausibilityGate`).
+
+    Defaults are loose for any surface vessel (30 kn, 5 m/s^2: far beyond what thrust gives a
+    hull, so only forged or broken telemetry trips them); the margins cover the sensor's noise
+    and a GNSS re-fix of a couple of metres between two samples.
+    """
+
+    max_speed_m_s: float = 15.0
+    max_yaw_rate_rad_s: float = 2.0
+    max_accel_m_s2: float = 5.0
+    position_margin_m: float = 2.0
+    velocity_margin_m_s: float = 0.5
+
+
+T_S = 0.2827  # s: the paper's sample time (section 4.2)
+
+
+@dataclass(frozen=True)
+class DaemonConfig:
+    """The daemon's settings: the vessel (thrusters, B (k, m), plant), the core's tunables,
+    the loop rate (Hz), the estimation period and the watchdog timeouts (s). The defaults
+    here are the only ones: ``[daemon]`` keys left out of a file take them."""
+
+    thrusters: ThrusterSet
+    B: FloatArray
+    plant: SurfaceVessel
+    core: CoreConfig
+    rate_hz: float = 1.0 / T_S
+    estimation_period_s: float = T_S  # one estimator sample per T_s of telemetry
+    setpoint_timeout_s: float = 1.0  # no setpoint for this long -> zero thrust
+    telemetry_timeout_s: float = 1.0  # telemetry older than this -> estimation frozen
+    esc_timeout_s: float = 0.5  # an ESC silent for this long -> thruster treated as failed
+    status_period_s: float = 0.1  # status publication period (decimation)
+    wake_on_setpoint: bool = True  # run a cycle as soon as a setpoint arrives
+    # time command averages over telemetry intervals by VesselClock (else by receipt stamps)
+    vessel_clock: bool = True
+    dt_clamp: tuple[float, float] = (0.2, 5.0)  # dt for rate limits, in periods (PX4 clamps)
+    # what the vessel can do: odometry beyond it is dropped before the estimator
+    odometry_limits: OdometryLimits = field(default_factory=OdometryLimits)
+    # ESC telemetry as evidence: no rpm (below this) under command for esc_stall_s -> the
+    # thruster is allocated as dead until it turns again (0: off)
+    esc_stall_rpm: float = 50.0
+    esc_stall_s: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -40,30 +90,35 @@ def daemon_config_from(root: Table) -> DaemonConfig:
     """``[daemon]`` (loop, watchdogs, mode), ``[vessel]``, ``[plant]`` and the core tables."""
     d = root.table("daemon")
     plant, ths, B = surface_vessel_from(root, "the daemon")
-    mode = d.enum("mode", Mode, Mode.FTCAP)
+    mode = d.enum("mode", Mode, defaults_of(CoreConfig)["mode"])
     if mode is Mode.ORACLE:
         raise d.error("mode", "'oracle' needs the true faults, which a daemon cannot know")
+    base = defaults_of(DaemonConfig)
+
+    def positive(key: str) -> float:
+        return d.number(key, base[key], positive=True)
+
     return DaemonConfig(
         thrusters=ths,
         B=B,
         plant=plant,
         core=core_config_from(root, mode, B.shape[0]),
-        rate_hz=d.number("rate_hz", 1.0 / 0.2827, positive=True),
-        estimation_period_s=d.number("estimation_period_s", 0.2827, positive=True),
-        setpoint_timeout_s=d.number("setpoint_timeout_s", 1.0, positive=True),
-        telemetry_timeout_s=d.number("telemetry_timeout_s", 1.0, positive=True),
-        esc_timeout_s=d.number("esc_timeout_s", 0.5, positive=True),
-        status_period_s=d.number("status_period_s", 0.1, positive=True),
-        wake_on_setpoint=d.boolean("wake_on_setpoint", True),
-        vessel_clock=d.boolean("vessel_clock", True),
+        rate_hz=positive("rate_hz"),
+        estimation_period_s=positive("estimation_period_s"),
+        setpoint_timeout_s=positive("setpoint_timeout_s"),
+        telemetry_timeout_s=positive("telemetry_timeout_s"),
+        esc_timeout_s=positive("esc_timeout_s"),
+        status_period_s=positive("status_period_s"),
+        wake_on_setpoint=d.boolean("wake_on_setpoint", base["wake_on_setpoint"]),
+        vessel_clock=d.boolean("vessel_clock", base["vessel_clock"]),
         odometry_limits=_odometry_limits(d),
-        esc_stall_rpm=d.number("esc_stall_rpm", 50.0, lo=0.0),
-        esc_stall_s=d.number("esc_stall_s", 1.0, positive=True),
+        esc_stall_rpm=d.number("esc_stall_rpm", base["esc_stall_rpm"], lo=0.0),
+        esc_stall_s=positive("esc_stall_s"),
     )
 
 
 def _odometry_limits(d: Table) -> OdometryLimits:
-    """``[daemon] odometry_*``: what the vessel can do (runtime/estimation.py)."""
+    """``[daemon] odometry_*``: what the vessel can do (:class:`OdometryLimits`)."""
     base = OdometryLimits()
     return OdometryLimits(
         *(d.number(f"odometry_{name}", getattr(base, name), positive=True) for name in base._fields)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 
+from ftcap_hil.config.table_dataclass import defaults_of
 from ftcap_hil.config.tables import Table
 from ftcap_hil.core.faults import Cause, EventKind, FaultEvent, FaultSchedule
 from ftcap_hil.core.messages import FloatArray
@@ -42,13 +43,13 @@ def fault_event(
         if other not in own and t.has(other):
             raise t.error(other, f"only for kind = {_owner(other)!r}")
     t.allow(*ALL_PROFILE_KEYS)
-    times = {key: t.number(key) for key in own}
-    cause = t.enum("cause", Cause) if t.has("cause") else None
+    base = defaults_of(FaultEvent)
+    ramp_s, on_s, off_s = (
+        t.number(k) if k in own else base[k] for k in ("ramp_s", "on_s", "off_s")
+    )
+    cause = t.enum("cause", Cause) if t.has("cause") else base["cause"]
     try:
-        return FaultEvent(
-            start, end, thruster, delta, bias, kind, times.get("ramp_s", 0.0),
-            times.get("on_s", 0.0), times.get("off_s", 0.0), cause,
-        )  # fmt: skip
+        return FaultEvent(start, end, thruster, delta, bias, kind, ramp_s, on_s, off_s, cause)
     except ValueError as e:
         raise t.error(None, str(e)) from None
 

@@ -19,29 +19,74 @@ mission replaces the scenario's table (same syntax as scenario files, docs/scena
     wrench_limit = [1000.0, 1000.0, 1000.0]  # demands beyond are shrunk along their direction
     clear_faults_at_end = true
 
-The fault schedule is the truth recorded in the timeseries; :func:`injection_plan` turns it
-into MAV_CMD_INJECT_FAILURE requests (:class:`Injection`) at every change. Pure: no I/O
-beyond reading the files.
+The fault schedule is the truth recorded in the timeseries;
+:func:`~ftcap_hil.core.faults.injection_plan` turns it into MAV_CMD_INJECT_FAILURE requests
+(:attr:`Mission.injections`) at every change, and
+:func:`ftcap_hil.runtime.ground_station.flight_plan` a mission into what a flight flies.
+Pure: no I/O beyond reading the files.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+import math
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ftcap_hil.config.realistic import is_realistic, parse_realistic
-from ftcap_hil.config.scenario import REPLACEABLE, SHIPPED, scenario_from
+from ftcap_hil.config.scenario import SHIPPED
+from ftcap_hil.config.scenario_tables import REPLACEABLE, scenario_from
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import TomlFile, read_toml, shipped_names
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.faults import Injection, injection_plan
+from ftcap_hil.core.scenario import Scenario, TimeUnit
 from ftcap_hil.core.status import Mode
-from ftcap_hil.runtime.ground_station import GcsSettings, Mission
 
 MISSIONS = "ftcap_hil.data.hil.missions"
 # The keys mission_from and gcs_settings_from read (tests/docker checks --set against them).
 MISSION_KEYS = ("name", "description", "scenario", "duration", "period", "mode")
 GCS_KEYS = ("connect_timeout_s", "odometry_timeout_s", "wrench_limit", "clear_faults_at_end")
+
+
+@dataclass(frozen=True)
+class GcsSettings:
+    """The ``[gcs]`` table of a mission: start-up and mid-flight timeouts (s), the wrench
+    limit [X (N), Y (N), N (N*m)] demands are shrunk to, and whether the vessel's faults are
+    cleared at the end."""
+
+    connect_timeout_s: float = 20.0
+    odometry_timeout_s: float = 5.0
+    wrench_limit: tuple[float, float, float] = (1000.0, 1000.0, 1000.0)  # the allocator's
+    clear_faults_at_end: bool = True
+
+
+@dataclass(frozen=True)
+class Mission:
+    """What ``ftcap-hil gcs`` flies: the scenario's reference, fault schedule (the truth it
+    injects and records) and controller, for ``duration_s``, every ``period_s`` (T_s)."""
+
+    name: str
+    description: str
+    scenario: Scenario  # reference, faults (truth), controller; duration_s = the mission's
+    period_s: float  # control period T_s
+    mode: Mode | None  # None: fly with whatever mode the allocator is in
+    gcs: GcsSettings
+    source: str
+
+    @property
+    def duration_s(self) -> float:
+        return self.scenario.duration_s
+
+    @property
+    def injections(self) -> list[Injection]:
+        """The MAV_CMD_INJECT_FAILURE requests that reproduce the fault schedule."""
+        return injection_plan(self.scenario.faults, self.duration_s)
+
+    def with_duration(self, duration_s: float) -> Mission:
+        if not (math.isfinite(duration_s) and duration_s > 0):
+            raise ConfigError(f"duration: expected a positive number of seconds, got {duration_s}")
+        return replace(self, scenario=replace(self.scenario, duration_s=float(duration_s)))
 
 
 def shipped_missions() -> list[str]:
@@ -83,7 +128,7 @@ def mission_from(root: Table, base: Path | None = None) -> Mission:
     else:
         with Table.document(sc_doc) as sc_root:
             sc = scenario_from(sc_root, root)
-    if sc.time_unit != "s":
+    if sc.time_unit is not TimeUnit.SECOND:
         raise head.error("scenario", f"{sc_doc.source!r} is not a vessel scenario")
     name = head.string("name", sc.name)
     mode = head.enum("mode", Mode, exclude=[Mode.ORACLE]) if head.has("mode") else None

@@ -24,7 +24,8 @@ import numpy as np
 
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
-from ftcap_hil.core.effectiveness.geometry import Thruster, ThrusterSet, effectiveness
+from ftcap_hil.config.vessel import thruster_set_from
+from ftcap_hil.core.effectiveness.geometry import ThrusterSet, effectiveness
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.vessel3dof import DAMPING_KEYS, Vessel3DOF
@@ -121,28 +122,12 @@ def _vessel(root: Table) -> Vessel3DOF:
         raise root.error(None, f"vessel model: {e}") from e
 
 
-def _thruster(t: Table) -> tuple[Thruster, float]:
-    th = Thruster(
-        name=t.string("name"),
-        x_m=t.number("x"),
-        y_m=t.number("y"),
-        angle_rad=math.radians(t.number("angle_deg")),
-        u_min=t.number("u_min"),
-        u_max=t.number("u_max"),
-        rate_max=t.number("rate_max", None, positive=True),
-        step_max=t.number("step_max", None, positive=True),
-    )
-    if not th.u_min <= 0.0 <= th.u_max or th.u_min == th.u_max:
-        raise t.error(None, f"need u_min <= 0 <= u_max, got {th.u_min}, {th.u_max}")
-    return th, t.number("time_constant_s", lo=0.0)
-
-
 def _thrusters(root: Table) -> tuple[ThrusterSet, FloatArray]:
-    parsed = [_thruster(t) for t in root.tables("thruster", required=True)]
-    names = [th.name for th, _ in parsed]
-    if len(set(names)) != len(names):
-        raise root.error("thruster", f"duplicate names in {names}")
-    return ThrusterSet(tuple(th for th, _ in parsed)), np.array([lag for _, lag in parsed])
+    """``[[thruster]]``: the vessel tables' thruster reader, plus each thruster's first-order
+    lag ``time_constant_s`` (s, >= 0)."""
+    ths = thruster_set_from(root)
+    lags = [t.number("time_constant_s", lo=0.0) for t in root.tables("thruster")]
+    return ths, np.array(lags)
 
 
 def _fields_in_degrees(t: Table, cls: type, exclude: tuple[str, ...] = ()) -> dict[str, Any]:

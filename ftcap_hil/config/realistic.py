@@ -34,8 +34,9 @@ A realistic scenario is a scenario file whose ``[plant]`` names a preset
     damping = 0.9
 
 The other tables ([scenario], [[reference]], [[fault]], [estimator], [allocator],
-[excitation]) are those of every scenario file; ``[scenario] estimation_period`` (s, a
-multiple of ``dt``) spaces the estimation samples over several wave periods. The estimator
+[excitation]) are those of every scenario file (:mod:`ftcap_hil.config.scenario_tables`);
+``[scenario] estimation_period_s`` (s, a multiple of ``dt``) spaces the estimation samples
+over several wave periods. The estimator
 is told the preset's sensor levels (``measurement_std``) unless the file states them.
 """
 
@@ -49,13 +50,15 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.config.presets import AllocatorModel, VesselPreset, apply_mismatch, load_preset
+from ftcap_hil.config.scenario_tables import scenario_from
 from ftcap_hil.config.tables import Table
-from ftcap_hil.config.toml import TomlFile
+from ftcap_hil.config.vessel import PlantKind
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.estimation.config import EstimatorConfig
 from ftcap_hil.core.models.controllers import PoseController
-from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.models.plants import Inversion
+from ftcap_hil.core.scenario import Integrator, Scenario
 from sim.environment import CurrentConfig, Environment, WindConfig
 from sim.sensors import SensorConfig
 from sim.thrusters import ThrusterBankConfig
@@ -67,13 +70,11 @@ OWN_TABLES = ("plant", "conditions", "mismatch", "sensor", "controller")
 def is_realistic(data: dict[str, Any]) -> bool:
     """Whether a scenario document names a vessel preset."""
     plant = data.get("plant")
-    return isinstance(plant, dict) and plant.get("kind") == "preset"
+    return isinstance(plant, dict) and plant.get("kind") == PlantKind.PRESET.value
 
 
 def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     """The scenario of a realistic scenario document (module docstring)."""
-    from ftcap_hil.config.scenario import parse_scenario
-
     root = Table(data, where)
     for name in OWN_TABLES:
         root.allow(name)
@@ -81,11 +82,12 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     plant_t = root.table("plant", required=True)
     plant_t.allow("kind")
     preset = load_preset(plant_t.string("preset"), seed=seed)
-    inversion = plant_t.choice("inversion", ("euler", "trapezoid"), "trapezoid")
+    inversion = plant_t.enum("inversion", Inversion, Inversion.TRAPEZOID)
     substeps = plant_t.integer("substeps", 4, lo=1)
     plant_t.finish()
     told = _allocator_model(preset, root.table("mismatch"), inversion)
-    sc = parse_scenario(_common_tables(data, told.thrusters), where)
+    with Table(_common_tables(data, told.thrusters), where) as common:
+        sc = scenario_from(common)
     truth, sensor = _truth(preset, root, seed, substeps, sc.dt_s)
     controller = _controller(root.table("controller"), np.diag(told.vessel.mass_matrix))
     core = sc.core
@@ -97,14 +99,12 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
             core, estimator=dataclasses.replace(core.estimator, measurement_std=std)
         )
     core = dataclasses.replace(core, estimator=_told_waves(core.estimator, truth))
-    est_period = _estimation_period(data, where, sc.dt_s)
     return dataclasses.replace(
         sc,
-        estimation_period_s=est_period,
         plant=told.vessel,
         controller=controller,
         core=core,
-        integrator="rk4",
+        integrator=Integrator.RK4,
         rk4_substeps=substeps,
         truth=truth,
         length_m=preset.hull.l_oa_m,
@@ -127,20 +127,6 @@ def _told_waves(est: EstimatorConfig, truth: TruthConfig) -> EstimatorConfig:
     return dataclasses.replace(est, wave_period_s=env.waves.tp_s, wave_force_std=std)
 
 
-def _estimation_period(data: dict[str, Any], where: str, dt_s: float) -> float | None:
-    """``[scenario] estimation_period`` (s): a whole number of control periods."""
-    value = data.get("scenario", {}).get("estimation_period")
-    if value is None:
-        return None
-    ok = isinstance(value, int | float) and not isinstance(value, bool) and value >= dt_s
-    if not ok or abs(value / dt_s - round(value / dt_s)) > 1e-6:
-        raise ConfigError(
-            f"{where}: [scenario] estimation_period: expected a multiple of dt ({dt_s} s), "
-            f"got {value!r}"
-        )
-    return float(value)
-
-
 def _seed(data: dict[str, Any], where: str) -> int:
     seed = data.get("scenario", {}).get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -148,7 +134,7 @@ def _seed(data: dict[str, Any], where: str) -> int:
     return seed
 
 
-def _allocator_model(preset: VesselPreset, mm: Table, inversion: str) -> AllocatorModel:
+def _allocator_model(preset: VesselPreset, mm: Table, inversion: Inversion) -> AllocatorModel:
     """The allocator's model: the preset with the file's mismatch (else the preset's own)."""
     kwargs: dict[str, Any] = {}
     if mm.has("mass"):
@@ -177,7 +163,6 @@ def _common_tables(data: dict[str, Any], thrusters: ThrusterSet) -> dict[str, An
     """The document with the preset's tables replaced by a plain vessel the common scenario
     loader reads (its thrusters are the allocator's; its plant is replaced afterwards)."""
     out = {k: copy.deepcopy(v) for k, v in data.items() if k not in OWN_TABLES}
-    out["scenario"] = {k: v for k, v in out.get("scenario", {}).items() if k != "estimation_period"}
     out["plant"] = {"kind": "vessel", "mass_kg": 1.0, "iz_kgm2": 1.0}
     out["vessel"] = {
         "thruster": [
@@ -257,8 +242,3 @@ def _sensor(preset: VesselPreset, t: Table, seed: int, dt_s: float) -> SensorCon
         dropout_p=dropout,
         seed=seed,
     )
-
-
-def realistic_document(doc: TomlFile) -> bool:
-    """Whether a parsed file is a realistic scenario (for loaders that dispatch on it)."""
-    return is_realistic(doc.data)

@@ -1,14 +1,19 @@
 """The simulated vessel's configuration file (``vessel.toml``): [sim], [esc], [vessel], [plant]
 and the bridge tables, read into the process shell's settings and the truth model's config.
+A key left out takes the default of :class:`ShellSettings`, of the truth model's
+:class:`~sim.vessel.VesselSimConfig` or of its ESC model (``sim.esc_model.DEFAULT_ESC``).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from ftcap_hil.config.bridges import vessel_ports_from
+from ftcap_hil.config.bridges import PortSettings, vessel_ports_from
 from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.config.table_dataclass import defaults_of
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import HIL_DATA, read_toml
 from ftcap_hil.config.vessel import surface_vessel_from
@@ -17,9 +22,31 @@ from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.plants import SurfaceVessel
-from ftcap_hil.runtime.vessel_process import ShellSettings, VesselConfig
 from sim.esc_model import DEFAULT_ESC, EscModel
 from sim.vessel import SilentWindow, VesselSimConfig
+
+
+@dataclass(frozen=True)
+class ShellSettings:
+    """What the process shell needs beyond the simulation itself (rates in wall-clock Hz)."""
+
+    rate_hz: float = 50.0
+    telemetry_rate_hz: float = 20.0
+    esc_status_rate_hz: float = 10.0
+    realtime_factor: float = 1.0  # sim seconds per wall second
+    fault_injection_enabled: bool = False  # SYS_FAILURE_EN at start-up
+
+
+@dataclass(frozen=True)
+class VesselConfig:
+    """The sim process's file: shell settings, the truth model, the merged TOML, the file's
+    name, and the ports ([can], [mavlink], [zenoh]) to open."""
+
+    shell: ShellSettings
+    sim: VesselSimConfig
+    raw: dict[str, Any]  # the merged TOML
+    source: str
+    ports: PortSettings
 
 
 def silent_windows(sim: Table, m: int) -> tuple[SilentWindow, ...]:
@@ -49,12 +76,17 @@ def esc_model_from(t: Table) -> EscModel:
 
 def shell_settings_from(sim: Table) -> ShellSettings:
     """The process shell's part of ``[sim]``: rates (wall-clock Hz) and SYS_FAILURE_EN."""
+    d = defaults_of(ShellSettings)
+
+    def rate(key: str) -> float:
+        return sim.number(key, d[key], positive=True)
+
     return ShellSettings(
-        sim.number("rate_hz", 50.0, positive=True),
-        sim.number("telemetry_rate_hz", 20.0, positive=True),
-        sim.number("esc_status_rate_hz", 10.0, positive=True),
-        sim.number("realtime_factor", 1.0, positive=True),
-        sim.boolean("fault_injection_enabled", False),
+        rate("rate_hz"),
+        rate("telemetry_rate_hz"),
+        rate("esc_status_rate_hz"),
+        rate("realtime_factor"),
+        sim.boolean("fault_injection_enabled", d["fault_injection_enabled"]),
     )
 
 
@@ -66,19 +98,19 @@ def sim_config_from(
     schedule: FaultSchedule | None,
 ) -> VesselSimConfig:
     """The truth model's part of [sim], and [esc], around an already parsed plant."""
-    s = root.table("sim")
+    s, d = root.table("sim"), defaults_of(VesselSimConfig)
     return VesselSimConfig(
         plant=plant,
         thrusters=thrusters,
         B=B,
-        x0=s.vector("x0", 6, [0.0] * 6),  # [north m, east m, psi rad, u m/s, v m/s, r rad/s]
-        command_timeout_s=s.number("command_timeout_s", 0.5, positive=True),
+        x0=s.vector("x0", 6, d["x0"].tolist()),  # [north m, east m, psi rad, u m/s, v m/s, r rad/s]
+        command_timeout_s=s.number("command_timeout_s", d["command_timeout_s"], positive=True),
         schedule=schedule,
         silent=silent_windows(s, thrusters.m),
         esc=esc_model_from(root.table("esc")),
-        default_weak_delta=s.number("default_weak_delta", 0.5, lo=0.0, hi=1.0),
-        default_bias_n=s.number("default_bias_n", 0.08),
-        rk4_substeps=s.integer("rk4_substeps", 8, lo=1),
+        default_weak_delta=s.number("default_weak_delta", d["default_weak_delta"], lo=0.0, hi=1.0),
+        default_bias_n=s.number("default_bias_n", d["default_bias_n"]),
+        rk4_substeps=s.integer("rk4_substeps", d["rk4_substeps"], lo=1),
     )
 
 

@@ -34,7 +34,6 @@ from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.messages import FloatArray
 
 E = TypeVar("E", bound=enum.Enum)
-D = TypeVar("D")
 
 
 class _Missing(enum.Enum):
@@ -342,20 +341,6 @@ class Table:
         if required and not v:
             raise self.error(key, f"expected at least one [[{key}]], got none")
         return [self._child(key, x, i) for i, x in enumerate(v)]
-
-    def dataclass(
-        self,
-        cls: type[D],
-        *,
-        choices: Mapping[str, Sequence[str]] | None = None,
-        exclude: Iterable[str] = (),
-        defaults: Mapping[str, Any] | None = None,
-    ) -> D:
-        """``cls`` built from this table, a key per field read by its annotation's type
-        (:func:`ftcap_hil.config.table_dataclass.read_dataclass`)."""
-        from ftcap_hil.config.table_dataclass import read_dataclass
-
-        return read_dataclass(self, cls, choices or {}, set(exclude), defaults or {})
 
     # ----------------------------------------------------------------- the end
 

@@ -8,11 +8,13 @@
 
 from __future__ import annotations
 
+import enum
 import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.config.table_dataclass import read_dataclass
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.effectiveness.geometry import (
@@ -26,8 +28,14 @@ from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
 
 PRESETS = ("paper-4.2",)
-PLANT_KINDS = ("linear", "vessel", "preset")
-INVERSIONS = ("euler", "trapezoid")
+
+
+class PlantKind(enum.Enum):
+    """``[plant] kind``: which plant model a file describes."""
+
+    LINEAR = "linear"  # section 4.1, with [actuators]
+    VESSEL = "vessel"  # section 4.2's vessel model, with [vessel]
+    PRESET = "preset"  # a realistic vessel preset (scenario files only, config/realistic.py)
 
 
 def _angle_rad(t: Table) -> float:
@@ -44,8 +52,10 @@ def _angle_rad(t: Table) -> float:
 
 
 def thruster_from(t: Table) -> Thruster:
-    """One ``[[vessel.thruster]]`` entry: name, x, y (m), angle_deg (or direction = [dx, dy]),
-    u_min, u_max (N), and optionally rate_max (N/s) or step_max (N per cycle)."""
+    """One ``[[thruster]]`` entry, of a vessel table or a vessel preset alike: ``name``
+    (default ``T<n>``, 1-based), ``x``, ``y`` (m), ``angle_deg`` or ``direction = [dx, dy]``,
+    ``u_min`` <= 0 <= ``u_max`` (N), and optionally ``rate_max`` (N/s) or ``step_max`` (N per
+    cycle), not both."""
     name = t.string("name", f"T{(t.index or 0) + 1}")
     angle = _angle_rad(t)
     thruster = Thruster(
@@ -63,6 +73,16 @@ def thruster_from(t: Table) -> Thruster:
     if thruster.rate_max is not None and thruster.step_max is not None:
         raise t.error(None, "give rate_max or step_max, not both")
     return thruster
+
+
+def thruster_set_from(t: Table) -> ThrusterSet:
+    """The ``[[thruster]]`` array of ``t`` (at least one, :func:`thruster_from` each), with
+    distinct names: the one reader of thruster tables (vessel tables and presets)."""
+    thrusters = tuple(thruster_from(e) for e in t.tables("thruster", required=True))
+    names = [th.name for th in thrusters]
+    if len(set(names)) != len(names):
+        raise t.error("thruster", f"duplicate names in {names}")
+    return ThrusterSet(thrusters)
 
 
 def _preset(t: Table) -> ThrusterSet:
@@ -85,11 +105,7 @@ def thrusters_from(t: Table) -> ThrusterSet:
     ``[[vessel.thruster]]`` (:func:`thruster_from`)."""
     if t.has("preset"):
         return _preset(t)
-    thrusters = tuple(thruster_from(e) for e in t.tables("thruster", required=True))
-    names = [th.name for th in thrusters]
-    if len(set(names)) != len(names):
-        raise t.error("thruster", f"duplicate names in {names}")
-    return ThrusterSet(thrusters)
+    return thruster_set_from(t)
 
 
 def thrusters_from_table(table: Mapping[str, Any], file: str = "vessel file") -> ThrusterSet:
@@ -123,14 +139,12 @@ def plant_from(root: Table) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, F
     """``[plant]`` (+ ``[actuators]`` for the linear plant, ``[vessel]`` for the vessel) of a
     file: the plant model, its thrusters and B (k x m)."""
     plant_t = root.table("plant", required=True)
-    kind = plant_t.choice("kind", PLANT_KINDS)
-    if kind == "preset":  # dispatched before this reader: a scenario file's realistic form
+    kind = plant_t.enum("kind", PlantKind)
+    if kind is PlantKind.PRESET:  # dispatched before this reader: a scenario file's realistic form
         raise plant_t.error("kind", "'preset' (a vessel preset) is for scenario files only")
-    if kind == "linear":
+    if kind is PlantKind.LINEAR:
         return _linear(root, plant_t)
-    vessel = plant_t.dataclass(
-        SurfaceVessel, exclude=("k", "state_labels"), choices={"inversion": INVERSIONS}
-    )
+    vessel = read_dataclass(plant_t, SurfaceVessel, exclude=("k", "state_labels"))
     ths = thrusters_from(root.table("vessel", required=True))
     return vessel, ths, effectiveness(ths)
 

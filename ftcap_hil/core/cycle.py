@@ -27,7 +27,7 @@ import numpy as np
 from ftcap_hil.core.allocation.allocator import Allocation, Allocator, AllocatorConfig
 from ftcap_hil.core.allocation.excitation import Excitation, ExcitationConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
-from ftcap_hil.core.estimation.config import Estimate, EstimatorConfig, wrench_scale
+from ftcap_hil.core.estimation.config import Estimate, EstimatorConfig, EstimatorKind, wrench_scale
 from ftcap_hil.core.estimation.decisions import Decision
 from ftcap_hil.core.estimation.shaft import (
     DiagnosisConfig,
@@ -127,7 +127,7 @@ class FtcapCore:
     N (N*m)], body frame) or 1 for the linear plant; ``thrusters``: the m thrusters' limits;
     ``period_s``: the allocation period (s). The mode picks the estimation stage
     (core/estimation/stages.py): ``FTCAP`` the Kalman estimator (or the windowed one with
-    ``estimator.kind = "windowed"``), ``FTCAP_LITERAL`` the paper's literal one,
+    ``estimator.kind = EstimatorKind.WINDOWED``), ``FTCAP_LITERAL`` the paper's literal one,
     ``ORACLE`` the truth handed in to :meth:`step`, ``CAP`` / ``NONE`` none (Delta_hat = I,
     f_hat = 0). ``plant``: the allocator's model of the plant, needed by the Kalman
     estimator and to invert :class:`Observation` samples for the windowed one. Pure and
@@ -194,7 +194,7 @@ class FtcapCore:
             return WindowedStage(literal, plant, on, off)
         if cfg.mode is not Mode.FTCAP:
             return IdentityStage(self.m, self.k)
-        if cfg.estimator.kind == "windowed":
+        if cfg.estimator.kind is EstimatorKind.WINDOWED:
             windowed = WindowedEstimator(self.B, self.scale, cfg.estimator)
             return WindowedStage(windowed, plant, on, off)
         if plant is None:

@@ -55,3 +55,12 @@ class MalformedMessage(FtcapError, ValueError):
 
 class PortError(FtcapError, RuntimeError):
     """A port (a bus, a socket, a session) cannot be opened or has failed."""
+
+
+def require_member(key: str, value: object, cls: type[enum.Enum]) -> None:
+    """ValueError naming ``key`` and the values of ``cls`` unless ``value`` is one of its
+    members: a switch of the core is its enum, never the enum's spelling in a file (the
+    config reader converts)."""
+    if not isinstance(value, cls):
+        names = ", ".join(repr(m.value) for m in cls)
+        raise ValueError(f"{key}: expected {cls.__name__} ({names}), got {value!r}")

@@ -11,9 +11,9 @@ output, a bias step. :func:`injection_plan` turns a schedule into the live fault
 for steps, biases and stuck outputs; a ramp becomes steps to its values at the schedule's
 change times (at least its end), and an intermittent
 fault's edges arrive with the injection path's latency. Ramps and intermittent faults are
-meant for the offline simulator and the sim process's own scenario schedule.
-:func:`random_faults` (``ftcap_hil.core.random_faults``) draws schedules for campaigns.
-Pure: no I/O, no clock.
+meant for the offline simulator and the sim process's own scenario schedule. Campaigns
+draw their random faults as scenario ``[[fault]]`` tables
+(:mod:`ftcap_hil.runtime.campaign_faults`). Pure: no I/O, no clock.
 """
 
 from __future__ import annotations

@@ -5,6 +5,7 @@ The type only; ``ftcap_hil.config.scenario`` reads it from TOML (docs/scenarios.
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -13,12 +14,27 @@ import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
+from ftcap_hil.core.errors import require_member
 from ftcap_hil.core.estimation.shaft import DriveModel
 from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.controllers import PoseController, StateFeedback
 from ftcap_hil.core.models.vessel3dof import PlantModel
 from ftcap_hil.core.status import Mode
+
+
+class Integrator(enum.Enum):
+    """How the offline truth integrates a vessel plant over one step."""
+
+    EULER = "euler"  # the plant's own step: the allocator's discrete model, exactly
+    RK4 = "rk4"  # ``rk4_substeps`` RK4 substeps with tau held
+
+
+class TimeUnit(enum.Enum):
+    """What a scenario's times count (the string is what results.json says)."""
+
+    SECOND = "s"
+    STEP = "step"  # the discrete linear plant of section 4.1
 
 
 @dataclass(frozen=True)
@@ -33,7 +49,7 @@ class Segment:
 class Scenario:
     """One offline closed-loop run (docs/scenarios.md): the plant (linear, state x (1,), or
     the surface vessel, x = [eta (3, NED), nu (3, body)]), its thrusters and B (k, m), the
-    step ``dt_s`` and ``duration_s`` (s; steps when ``time_unit`` is "step"), the initial
+    step ``dt_s`` and ``duration_s`` (s; steps when ``time_unit`` is ``STEP``), the initial
     state ``x0``, the nominal controller and its piecewise-constant reference, the true
     faults, the allocator core's settings, the truth's integrator and the state noise
     (``noise_std``, per state component, with ``seed``).
@@ -51,11 +67,11 @@ class Scenario:
     reference: tuple[Segment, ...]
     faults: FaultSchedule
     core: CoreConfig
-    integrator: str = "euler"  # truth: "euler" (= the allocator's model) or "rk4"
+    integrator: Integrator = Integrator.EULER  # the truth's (a paper-world scenario)
     rk4_substeps: int = 8
     noise_std: FloatArray = field(default_factory=lambda: np.zeros(0))
     seed: int = 0
-    time_unit: str = "s"  # "step" for the discrete linear plant
+    time_unit: TimeUnit = TimeUnit.SECOND
     # The vessel's truth when it is not the allocator's plant: a sim.truth.TruthConfig
     # (realistic scenarios, config/realistic.py); None: the paper's world, where the truth
     # is ``plant`` itself integrated by ``integrator``.
@@ -67,6 +83,10 @@ class Scenario:
     # The drives as their data sheets give them (core/estimation/shaft.py), one per thruster:
     # the allocator then judges each thruster by its own telemetry (None: motion only).
     drives: tuple[DriveModel, ...] | None = None
+
+    def __post_init__(self) -> None:
+        require_member("integrator", self.integrator, Integrator)
+        require_member("time_unit", self.time_unit, TimeUnit)
 
     @property
     def steps(self) -> int:

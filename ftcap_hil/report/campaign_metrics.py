@@ -35,38 +35,11 @@ from typing import Any
 
 import numpy as np
 
+from ftcap_hil.config.campaign import MetricParams
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.report.records import RunRecord
 
 KINDS = ("dead", "stuck", "partial", "bias", "mixed", "intermittent")
-
-
-@dataclass(frozen=True)
-class MetricParams:
-    """The metrics' parameters (``[metrics]`` of a campaign file); times in s."""
-
-    convergence_tol: float = 0.1  # |delta_hat - delta| counted as "estimated"
-    converge_hold_s: float = 2.0  # ... held this long
-    used_fraction: float = 0.1  # |u| >= this x range: the thruster is "used"
-    used_window_s: float = 5.0  # "used" judged over this long after the onset
-    tail_fraction: float = 0.25  # last part of an episode for errors and isolation
-    isolation_hold: float = 0.9  # share of the tail isolated for "correct isolation"
-    recovery_hold_s: float = 2.0  # back in the allocation for this long
-    harm_ratio: float = 1.05  # harm: deviation > max(harm_ratio x CAP's, ...
-    harm_length_fraction: float = 0.01  # ... this x the vessel's length)
-    harm_statistic: str = "max"  # per phase: "max" or "rms" of the deviation
-
-    def __post_init__(self) -> None:
-        for name in ("convergence_tol", "converge_hold_s", "used_window_s", "recovery_hold_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: must be > 0, got {getattr(self, name)}")
-        for name in ("used_fraction", "tail_fraction", "isolation_hold"):
-            if not 0 < getattr(self, name) <= 1:
-                raise ValueError(f"{name}: need (0, 1], got {getattr(self, name)}")
-        if not self.harm_ratio >= 1 or not self.harm_length_fraction >= 0:
-            raise ValueError("harm_ratio must be >= 1 and harm_length_fraction >= 0")
-        if self.harm_statistic not in ("max", "rms"):
-            raise ValueError(f"harm_statistic: 'max' or 'rms', got {self.harm_statistic!r}")
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ftcap_hil.report.campaign_metrics import MetricParams
+from ftcap_hil.config.campaign import MetricParams
 from ftcap_hil.report.campaign_summary import (
     Row,
     derive,
@@ -131,7 +131,7 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "",
         f"## Harm ({len(harm)} run phases)",
         "",
-        f"A run phase where a mode's {params.harm_statistic} deviation exceeds "
+        f"A run phase where a mode's {params.harm_statistic.value} deviation exceeds "
         f"max({params.harm_ratio:g} x CAP's, {params.harm_length_fraction:g} x the vessel's "
         "length).",
         "",

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.report.campaign_metrics import MetricParams
+from ftcap_hil.config.campaign import MetricParams
 
 REFERENCE_MODES = ("none", "cap")
 Row = dict[str, Any]
@@ -42,7 +42,7 @@ def _ratio(a: float | None, b: float | None) -> float | None:
 def _harm(row: Row, cap: Row | None, p: MetricParams) -> tuple[bool | None, list[int]]:
     """Phases (indices) where the run deviates more than max(ratio x CAP, floor)."""
     floor = p.harm_length_fraction * row["length_m"]
-    stat = f"deviation_{p.harm_statistic}"
+    stat = f"deviation_{p.harm_statistic.value}"
     if cap is None and not row["healthy"]:
         return None, []
     phases = []

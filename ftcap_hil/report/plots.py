@@ -23,7 +23,7 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from ftcap_hil.core.messages import FloatArray  # noqa: E402
 from ftcap_hil.core.models.plants import LinearPlant  # noqa: E402
-from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.scenario import Scenario, TimeUnit
 from ftcap_hil.report.records import RunRecord  # noqa: E402
 
 FIGSIZE = (10.0, 7.0)
@@ -76,7 +76,7 @@ def _truth_record(records: Records) -> RunRecord:
 
 
 def _time_label(sc: Scenario) -> str:
-    return "time [step]" if sc.time_unit == "step" else "time [s]"
+    return "time [step]" if sc.time_unit is TimeUnit.STEP else "time [s]"
 
 
 def _fault_lines(ax: Axes, sc: Scenario) -> None:

@@ -271,9 +271,9 @@ def results(records: dict[str, RunRecord]) -> dict[str, Any]:
     out: dict[str, Any] = {
         "schema": SCHEMA_VERSION,
         "scenario": sc.name,
-        "time_unit": sc.time_unit,
+        "time_unit": sc.time_unit.value,
         "dt": sc.dt_s,
-        "integrator": sc.integrator,
+        "integrator": sc.integrator.value,
         "phases": sc.phases(),
         "modes": {},
     }

@@ -14,12 +14,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ftcap_hil.config.bridges import CanSettings, PortSettings
+from ftcap_hil.config.daemon import DaemonConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.messages import EscStatus
 from ftcap_hil.core.status import AllocatorStatus, Severity
 from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
-from ftcap_hil.runtime.daemon import DaemonConfig, Ports
-from ftcap_hil.runtime.port_settings import CanSettings, PortSettings
+from ftcap_hil.runtime.daemon import Ports
 
 
 class AllocatorSettings(Protocol):

@@ -26,10 +26,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ftcap_hil.config.campaign import MetricParams
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
-from ftcap_hil.report.campaign_metrics import MetricParams, Reference, reference_of, run_metrics
+from ftcap_hil.report.campaign_metrics import Reference, reference_of, run_metrics
 
 if TYPE_CHECKING:
     from distributed import Client, Future

@@ -31,17 +31,16 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ftcap_hil.config.daemon import DaemonConfig
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
-from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
-from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import EventQueue, Mailbox
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.esc_watchdog import EscStallMonitor, EscWatchdog
-from ftcap_hil.runtime.estimation import EstimationSampler, OdometryLimits, newest_odometry
+from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
 from ftcap_hil.runtime.signals import capture_signals
@@ -95,33 +94,6 @@ class Ports:
     def malformed(self) -> int:
         """Malformed inputs dropped so far on every setpoint and telemetry port."""
         return sum(b.malformed for b in self.setpoints) + sum(b.malformed for b in self.telemetry)
-
-
-@dataclass(frozen=True)
-class DaemonConfig:
-    """The daemon's settings: the vessel (thrusters, B (k, m), plant), the core's tunables,
-    the loop rate (Hz), the estimation period and the watchdog timeouts (s)."""
-
-    thrusters: ThrusterSet
-    B: FloatArray
-    plant: SurfaceVessel
-    core: CoreConfig
-    rate_hz: float = 1.0 / 0.2827
-    estimation_period_s: float = 0.2827
-    setpoint_timeout_s: float = 1.0
-    telemetry_timeout_s: float = 1.0
-    esc_timeout_s: float = 0.5
-    status_period_s: float = 0.1
-    wake_on_setpoint: bool = True
-    # time command averages over telemetry intervals by VesselClock (else by receipt stamps)
-    vessel_clock: bool = True
-    dt_clamp: tuple[float, float] = (0.2, 5.0)  # dt for rate limits, in periods (PX4 clamps)
-    # what the vessel can do: odometry beyond it is dropped before the estimator
-    odometry_limits: OdometryLimits = field(default_factory=OdometryLimits)
-    # ESC telemetry as evidence: no rpm (below this) under command for esc_stall_s -> the
-    # thruster is allocated as dead until it turns again (0: off)
-    esc_stall_rpm: float = 50.0
-    esc_stall_s: float = 1.0
 
 
 def _latest(boxes: Sequence[Mailbox[Any]]) -> tuple[Any, int]:

@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ftcap_hil.config.daemon import OdometryLimits
 from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.messages import FloatArray, Odometry
 from ftcap_hil.ports.mailbox import Stamped
@@ -106,21 +107,6 @@ class VesselClock:
         self._offsets.append(receipt_ns - t_ns)
         mapped = t_ns + min(self._offsets)
         return mapped if receipt_ns - mapped <= self._max_shift_ns else receipt_ns
-
-
-class OdometryLimits(NamedTuple):
-    """What the vessel can do: telemetry beyond it is implausible (:class:`PlausibilityGate`).
-
-    Defaults are loose for any surface vessel (30 kn, 5 m/s^2: far beyond what thrust gives a
-    hull, so only forged or broken telemetry trips them); the margins cover the sensor's noise
-    and a GNSS re-fix of a couple of metres between two samples.
-    """
-
-    max_speed_m_s: float = 15.0
-    max_yaw_rate_rad_s: float = 2.0
-    max_accel_m_s2: float = 5.0
-    position_margin_m: float = 2.0
-    velocity_margin_m_s: float = 0.5
 
 
 class PlausibilityGate:

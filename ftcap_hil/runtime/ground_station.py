@@ -19,27 +19,25 @@ caller opens and closes it):
 Failures are :class:`GroundStationError` subclasses carrying the shared exit codes
 (:class:`~ftcap_hil.core.errors.ExitCode`): :class:`NoAnswer` (3) at start-up,
 :class:`LinkLost` (4) mid-flight, :class:`Refused` (5), :class:`Interrupted` (130) when a
-stop was requested before the flight began. The :class:`Mission` and :class:`GcsSettings`
-types are what ``ftcap_hil.config.mission`` builds from a mission file.
+stop was requested before the flight began. :func:`flight_plan` turns a
+:class:`~ftcap_hil.config.mission.Mission` (what ``ftcap_hil.config.mission`` reads from a
+mission file) into the :class:`FlightPlan` a flight flies.
 """
 
 from __future__ import annotations
 
 import functools
-import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import TypeVar
 
 from bridges.mavlink.allocator_params import CODE_OF_MODE, MODE_CODES
 from bridges.mavlink.gcs import MavlinkGcsLink
 from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavResult
-from ftcap_hil.core.errors import ConfigError
-from ftcap_hil.core.faults import Injection, injection_plan
+from ftcap_hil.config.mission import Mission
 from ftcap_hil.core.messages import FaultKind
-from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.flight import FlightRecorder
 from ftcap_hil.runtime.gcs_flight import Flight, log
@@ -60,13 +58,12 @@ __all__ = [
     "Connection",
     "Flight",
     "FlightPlan",
-    "GcsSettings",
+    "flight_plan",
     "GroundStation",
     "GroundStationError",
     "InjectionOutcome",
     "Interrupted",
     "LinkLost",
-    "Mission",
     "NoAnswer",
     "Refused",
     "StatusLine",
@@ -77,59 +74,18 @@ __all__ = [
 T = TypeVar("T")
 
 
-# --- what a mission is (ftcap_hil.config.mission builds it from a file) ---
-
-
-@dataclass(frozen=True)
-class GcsSettings:
-    """The ``[gcs]`` table of a mission: start-up and mid-flight timeouts (s), the wrench
-    limit [X (N), Y (N), N (N*m)] demands are shrunk to, and whether the vessel's faults are
-    cleared at the end."""
-
-    connect_timeout_s: float = 20.0
-    odometry_timeout_s: float = 5.0
-    wrench_limit: tuple[float, float, float] = (1000.0, 1000.0, 1000.0)  # the allocator's
-    clear_faults_at_end: bool = True
-
-
-@dataclass(frozen=True)
-class Mission:
-    """What ``ftcap-hil gcs`` flies: the scenario's reference, fault schedule (the truth it
-    injects and records) and controller, for ``duration_s``, every ``period_s`` (T_s)."""
-
-    name: str
-    description: str
-    scenario: Scenario  # reference, faults (truth), controller; duration_s = the mission's
-    period_s: float  # control period T_s
-    mode: Mode | None  # None: fly with whatever mode the allocator is in
-    gcs: GcsSettings
-    source: str
-
-    @property
-    def duration_s(self) -> float:
-        return self.scenario.duration_s
-
-    @property
-    def injections(self) -> list[Injection]:
-        """The MAV_CMD_INJECT_FAILURE requests that reproduce the fault schedule."""
-        return injection_plan(self.scenario.faults, self.duration_s)
-
-    def with_duration(self, duration_s: float) -> Mission:
-        if not (math.isfinite(duration_s) and duration_s > 0):
-            raise ConfigError(f"duration: expected a positive number of seconds, got {duration_s}")
-        return replace(self, scenario=replace(self.scenario, duration_s=float(duration_s)))
-
-    def flight_plan(self) -> FlightPlan:
-        """Eq. (24) of the scenario toward its reference, its injections, the [gcs] limits."""
-        sc = self.scenario
-        return FlightPlan(
-            WrenchLaw.track(sc.reference_at, sc.controller),
-            self.period_s,
-            duration_s=self.duration_s,
-            injections=tuple(self.injections),
-            wrench_limit=self.gcs.wrench_limit,
-            odometry_timeout_s=self.gcs.odometry_timeout_s,
-        )
+def flight_plan(mission: Mission) -> FlightPlan:
+    """Eq. (24) of the mission's scenario toward its reference, its injections and the
+    ``[gcs]`` limits, every ``period_s``."""
+    sc = mission.scenario
+    return FlightPlan(
+        WrenchLaw.track(sc.reference_at, sc.controller),
+        mission.period_s,
+        duration_s=mission.duration_s,
+        injections=tuple(mission.injections),
+        wrench_limit=mission.gcs.wrench_limit,
+        odometry_timeout_s=mission.gcs.odometry_timeout_s,
+    )
 
 
 @dataclass(frozen=True)

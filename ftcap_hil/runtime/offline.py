@@ -20,7 +20,7 @@ from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.plants import LinearPlant
-from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.scenario import Integrator, Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import Recorder, RunRecord
 from sim.sensors import Measurement
@@ -29,7 +29,7 @@ from sim.truth import TruthModel
 
 def true_step(sc: Scenario, x: FloatArray, tau: FloatArray, dt: float | None = None) -> FloatArray:
     dt = sc.dt_s if dt is None else dt
-    if isinstance(sc.plant, LinearPlant) or sc.integrator == "euler":
+    if isinstance(sc.plant, LinearPlant) or sc.integrator is Integrator.EULER:
         return sc.plant.step(x, tau, dt)
     return sc.plant.step_rk4(x, tau, dt, sc.rk4_substeps)
 

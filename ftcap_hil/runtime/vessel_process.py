@@ -27,58 +27,29 @@ import contextlib
 import csv
 import logging
 import math
-from dataclasses import dataclass
 from typing import IO, Any
 
 import numpy as np
 
+from ftcap_hil.config.bridges import CanSettings, MavlinkSettings, PortSettings, ZenohSettings
+from ftcap_hil.config.sim import VesselConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError, PortError
 from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, Odometry, ThrusterCommand
 from ftcap_hil.core.status import Severity
 from ftcap_hil.ports.mailbox import Stamped
 from ftcap_hil.runtime.loop import DeadlineLoop
-from ftcap_hil.runtime.port_settings import (
-    CanSettings,
-    MavlinkSettings,
-    PortSettings,
-    ZenohSettings,
-)
 from ftcap_hil.runtime.signals import capture_signals
 from ftcap_hil.runtime.transitions import TransitionLog, log_to
 from sim.vessel import (
     Decimator,
     SimSample,
     VesselSim,
-    VesselSimConfig,
     record_header,
     record_row,
 )
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class ShellSettings:
-    """What the process shell needs beyond the simulation itself (rates in wall-clock Hz)."""
-
-    rate_hz: float = 50.0
-    telemetry_rate_hz: float = 20.0
-    esc_status_rate_hz: float = 10.0
-    realtime_factor: float = 1.0  # sim seconds per wall second
-    fault_injection_enabled: bool = False  # SYS_FAILURE_EN at start-up
-
-
-@dataclass(frozen=True)
-class VesselConfig:
-    """The sim process's file: shell settings, the truth model, the merged TOML, the file's
-    name, and the ports ([can], [mavlink], [zenoh]) to open."""
-
-    shell: ShellSettings
-    sim: VesselSimConfig
-    raw: dict[str, Any]  # the merged TOML
-    source: str
-    ports: PortSettings
 
 
 class Recorder:

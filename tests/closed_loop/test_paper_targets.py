@@ -18,7 +18,9 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.scenario import load_scenario
-from ftcap_hil.core.scenario import Scenario
+from ftcap_hil.core.estimation.config import EstimatorKind
+from ftcap_hil.core.models.plants import Inversion
+from ftcap_hil.core.scenario import Integrator, Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.records import results
 from ftcap_hil.runtime.offline import run_modes
@@ -35,12 +37,13 @@ def _results(
 ) -> tuple[Any, Any]:
     sc: Scenario = load_scenario(name)
     if kind:
-        est = dataclasses.replace(sc.core.estimator, kind=kind)
+        est = dataclasses.replace(sc.core.estimator, kind=EstimatorKind(kind))
         sc = dataclasses.replace(sc, core=dataclasses.replace(sc.core, estimator=est))
     if integrator:
-        sc = dataclasses.replace(sc, integrator=integrator)
+        sc = dataclasses.replace(sc, integrator=Integrator(integrator))
     if inversion:
-        sc = dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, inversion=inversion))
+        plant = dataclasses.replace(sc.plant, inversion=Inversion(inversion))
+        sc = dataclasses.replace(sc, plant=plant)
     recs = run_modes(sc, ALL)
     return results(recs), recs
 
@@ -179,7 +182,7 @@ def test_ex2_limits10_ftcap_holds_position_cap_drifts(kind: str, bound: float) -
 # --- measurement noise (docs/algorithm.md, known limitation) ------------------------------
 
 
-def _noisy_ex1(std: float, seed: int, **estimator: float | str) -> tuple[Any, Any]:
+def _noisy_ex1(std: float, seed: int, **estimator: float | EstimatorKind) -> tuple[Any, Any]:
     sc = load_scenario("paper-4.2-ex1")
     noise = np.array([std if s in ("u", "v", "r") else 0.0 for s in sc.plant.state_labels])
     core = dataclasses.replace(
@@ -197,7 +200,7 @@ def test_velocity_noise_kalman_does_no_harm_and_beats_cap(seed: int) -> None:
     (~1e-3 m); after the onset it compensates the attributed 0.01 N bias (0.012 m against
     CAP's 0.026 m, measured over seeds 0-3)."""
     kalman = _noisy_ex1(1e-3, seed)
-    windowed = _noisy_ex1(1e-3, seed, kind="windowed")
+    windowed = _noisy_ex1(1e-3, seed, kind=EstimatorKind.WINDOWED)
     assert _phase(kalman, "ftcap", 0)["deviation_rms"] < 1e-9
     assert _phase(windowed, "ftcap", 0)["deviation_rms"] > 1e-4
     cap = _phase(kalman, "cap", 1)["deviation_rms"]
@@ -210,7 +213,10 @@ def test_prefilter_keeps_noise_free_onset_reaction() -> None:
     when the filter kept the straddling sample's memory)."""
     sc = load_scenario("paper-4.2-ex2-bias008")
     core = dataclasses.replace(
-        sc.core, estimator=dataclasses.replace(sc.core.estimator, kind="windowed", prefilter=0.3)
+        sc.core,
+        estimator=dataclasses.replace(
+            sc.core.estimator, kind=EstimatorKind.WINDOWED, prefilter=0.3
+        ),
     )
     res = results(run_modes(dataclasses.replace(sc, core=core, duration_s=60.0), [Mode.FTCAP]))
     conv = _phase(res, "ftcap", 1)["delta_convergence_time"]

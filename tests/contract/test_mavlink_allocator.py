@@ -11,7 +11,8 @@ import pytest
 
 from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.codec import StatusFlag, SystemStatus, quaternion_from_yaw, status_from_message
-from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, LinkConfigError, MavlinkEndpoint
+from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.errors import LinkConfigError
 from bridges.mavlink.params import ParamSpec, ParamType
 from ftcap_hil.core.messages import ThrusterCommand
 from ftcap_hil.core.status import AllocatorStatus

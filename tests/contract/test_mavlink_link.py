@@ -14,12 +14,12 @@ from bridges.mavlink.config import (
     ALLOCATOR_PORT,
     GCS_PORT,
     VESSEL_PORT,
-    LinkConfigError,
     MavlinkEndpoint,
     default_allocator_endpoint,
     default_gcs_endpoint,
     default_vessel_endpoint,
 )
+from bridges.mavlink.errors import LinkConfigError
 from bridges.mavlink.link import MavlinkPort, Route
 from ftcap_hil.core.errors import MalformedMessage
 from tests.support.mavlink_peers import RawPeer, free_udp_ports

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from bridges.mavlink.config import LinkConfigError
+from bridges.mavlink.errors import LinkConfigError
 from bridges.mavlink.params import ParamServer, ParamSpec, ParamType
 
 

@@ -15,7 +15,8 @@ import pytest
 
 from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.commands import MavResult
-from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, LinkConfigError, MavlinkEndpoint
+from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.errors import LinkConfigError
 from bridges.mavlink.params import ParamSpec, ParamType
 from bridges.mavlink.signing import load_signing_key, signing_timestamp
 from bridges.mavlink.vessel import (

@@ -14,7 +14,8 @@ import pytest
 from bridges.mavlink.allocator import AllocatorLinkConfig, MavlinkAllocatorLink
 from bridges.mavlink.allocator_params import allocator_param_specs
 from bridges.mavlink.commands import MavResult
-from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, LinkConfigError, MavlinkEndpoint
+from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint
+from bridges.mavlink.errors import LinkConfigError
 from bridges.mavlink.geodesy import GeodeticOrigin
 from bridges.mavlink.params import ParamServer, ParamSpec, ParamType, decode_set_value
 from bridges.mavlink.vessel import (

@@ -334,13 +334,13 @@ def test_a_worker_that_dies_is_a_recorded_failure_and_the_campaign_goes_on(
     from distributed import Client
 
     from ftcap_hil.config.campaign import load_campaign
-    from ftcap_hil.config.campaign_plan import plan_campaign
     from ftcap_hil.runtime.campaign import (
         ReferenceResult,
         _completed,
         embedded_cluster,
         execute_reference,
     )
+    from ftcap_hil.runtime.campaign_plan import plan_campaign
 
     plan, _ = plan_campaign(load_campaign(spec), tmp_path)
     ref_task = plan.tasks[0]

@@ -11,17 +11,19 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.campaign import (
+    DrawnKind,
     FaultSpec,
     load_campaign,
     parse_campaign,
     shipped_campaigns,
 )
-from ftcap_hil.config.campaign_faults import random_faults
-from ftcap_hil.config.campaign_plan import deep_merge, dumps_toml, plan_campaign
 from ftcap_hil.config.scenario import load_scenario, parse_scenario, shipped_scenarios
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.estimation.config import EstimatorKind
 from ftcap_hil.core.status import Mode
+from ftcap_hil.runtime.campaign_faults import random_faults
+from ftcap_hil.runtime.campaign_plan import deep_merge, dumps_toml, plan_campaign
 
 SMALL = """
 [campaign]
@@ -63,6 +65,15 @@ def test_the_shipped_campaigns_parse_and_plan(tmp_path: Path) -> None:
     plan, _ = plan_campaign(load_campaign("realistic"), tmp_path)
     faulty = [t for t in plan.tasks if not t.healthy]
     assert len(faulty) == 375  # 3 scenarios x 5 kinds x 5 seeds x (none, cap, oracle, 2 ftcap)
+    kinds = {t.variant: t.scenario.core.estimator.kind for t in faulty}
+    assert kinds["ftcap-windowed"] is EstimatorKind.WINDOWED  # estimator = { kind = "windowed" }
+    assert kinds["ftcap"] is EstimatorKind.KALMAN
+
+
+def test_a_variants_bad_estimator_kind_is_refused_when_planning(tmp_path: Path) -> None:
+    text = SMALL.replace("estimator = { prefilter = 0.3 }", 'estimator = { kind = "windowd" }')
+    with pytest.raises(ConfigError, match=r"\[estimator\] kind: 'windowd' is not one of"):
+        plan_campaign(_parse(text), tmp_path)
 
 
 def _typo(table: str, key: str):  # noqa: ANN202
@@ -203,17 +214,17 @@ def test_the_generator_is_reproducible_and_follows_its_ranges() -> None:
     other = random_faults(np.random.default_rng(8), u_range, 100.0, spec)
     assert other != draws[0]
     for seed in range(40):
-        for kind in ("dead", "stuck", "partial", "bias", "intermittent"):
+        for kind in DrawnKind:
             gen = random_faults(np.random.default_rng(seed), u_range, 100.0, spec, kind)
             assert len({g.thruster for g in gen}) == 2
             for g in gen:
                 _check(g.kind, g.tables, spec)
 
 
-def _check(kind: str, tables: tuple, spec: FaultSpec) -> None:
+def _check(kind: DrawnKind, tables: tuple, spec: FaultSpec) -> None:
     first = tables[0]
     assert 10.0 <= first["from"] <= 20.0
-    if kind == "intermittent":
+    if kind is DrawnKind.INTERMITTENT:
         assert len(tables) >= 2 and all(t["delta"] == 0.0 for t in tables)
         for a, b in zip(tables[:-1], tables[1:], strict=True):
             off = b["from"] - a["until"]
@@ -221,14 +232,70 @@ def _check(kind: str, tables: tuple, spec: FaultSpec) -> None:
         assert tables[-1]["until"] <= 100.0
         return
     assert len(tables) == 1 and "until" not in first  # permanent without a duration range
-    if kind == "partial":
+    if kind is DrawnKind.PARTIAL:
         assert 0.3 <= first["delta"] <= 0.7 and first["bias"] == 0.0
-    elif kind == "bias":
+    elif kind is DrawnKind.BIAS:
         assert first["delta"] == 1.0 and 0.01 <= abs(first["bias"]) <= 0.03
-    elif kind == "stuck":
+    elif kind is DrawnKind.STUCK:
         assert first["delta"] == 0.0 and 0.02 <= abs(first["bias"]) <= 0.06
     else:
         assert (first["delta"], first["bias"]) == (0.0, 0.0)
+
+
+def test_faults_with_a_duration_range_end_within_it() -> None:
+    """(Ported from the former core/random_faults.py tests, as the ones below.)"""
+    spec = FaultSpec(count=3, onset=(10.0, 20.0), duration=(5.0, 15.0))
+    rng = np.random.default_rng(0)
+    for kind in (DrawnKind.DEAD, DrawnKind.PARTIAL, DrawnKind.BIAS, DrawnKind.STUCK):
+        for _ in range(50):
+            for g in random_faults(rng, np.full(4, 0.1), 100.0, spec, kind):
+                (t,) = g.tables
+                assert 5.0 <= t["until"] - t["from"] <= 15.0
+
+
+def test_intermittent_faults_are_on_and_off_for_their_ranges_and_end_in_the_run() -> None:
+    spec = FaultSpec(count=1, onset=(10.0, 20.0), duration=(30.0, 60.0))
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        (g,) = random_faults(rng, np.full(4, 0.1), 50.0, spec, DrawnKind.INTERMITTENT)
+        ons = [t["until"] - t["from"] for t in g.tables]
+        assert all(on <= spec.intermittent_on[1] for on in ons)
+        assert all(on >= spec.intermittent_on[0] for on in ons[:-1])  # the last one may be cut
+        assert g.tables[-1]["until"] <= 50.0
+
+
+def test_drawn_kinds_come_from_the_spec_and_every_one_is_drawn() -> None:
+    rng = np.random.default_rng(5)
+    only = FaultSpec(kinds=(DrawnKind.STUCK, DrawnKind.BIAS), count=2)
+    seen = {g.kind for _ in range(100) for g in random_faults(rng, np.full(4, 0.1), 60.0, only)}
+    assert seen == {DrawnKind.STUCK, DrawnKind.BIAS}
+    every = FaultSpec(count=1)
+    seen = {g.kind for _ in range(200) for g in random_faults(rng, np.full(4, 0.1), 60.0, every)}
+    assert seen == set(DrawnKind)
+
+
+def test_faults_fall_on_the_allowed_thrusters_once_each_in_thruster_order() -> None:
+    spec = FaultSpec(count=2, thrusters=(1, 3))
+    rng = np.random.default_rng(2)
+    for _ in range(30):
+        gen = random_faults(rng, np.full(5, 0.1), 60.0, spec, DrawnKind.DEAD)
+        assert [g.thruster for g in gen] == [1, 3]
+        assert [t["thruster"] for g in gen for t in g.tables] == [2, 4]  # 1-based in the file
+    with pytest.raises(ValueError, match="faults.count = 3 but only 2 thrusters allowed"):
+        random_faults(rng, np.full(5, 0.1), 60.0, FaultSpec(count=3, thrusters=(1, 3)))
+    with pytest.raises(ValueError, match="the vessel has 5 thrusters"):
+        random_faults(rng, np.full(5, 0.1), 60.0, FaultSpec(thrusters=(7,)))
+
+
+def test_changing_one_severity_range_changes_no_other_draw() -> None:
+    u_range = np.full(4, 0.1)
+    base = FaultSpec(count=2, duration=(5.0, 15.0))
+    other = FaultSpec(count=2, duration=(5.0, 15.0), stuck=(0.4, 0.5), partial_delta=(0.1, 0.2))
+    for seed in range(20):
+        a = random_faults(np.random.default_rng(seed), u_range, 60.0, base)
+        b = random_faults(np.random.default_rng(seed), u_range, 60.0, other)
+        assert [(g.thruster, g.kind) for g in a] == [(g.thruster, g.kind) for g in b]
+        assert [g.tables[0]["from"] for g in a] == [g.tables[0]["from"] for g in b]
 
 
 def test_generated_tables_are_valid_scenario_faults() -> None:

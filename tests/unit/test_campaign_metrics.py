@@ -14,12 +14,12 @@ from typing import Any
 import numpy as np
 import pytest
 
+from ftcap_hil.config.campaign import MetricParams
 from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.core.faults import FaultEvent, FaultSchedule
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.campaign_metrics import (
-    MetricParams,
     Reference,
     classify,
     episodes,

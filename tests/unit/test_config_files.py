@@ -24,6 +24,9 @@ from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import shipped_config
 from ftcap_hil.config.vessel import load_vessel
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.estimation.config import BiasCompensation, EstimatorKind
+from ftcap_hil.core.models.plants import Inversion, SurfaceVessel
+from ftcap_hil.core.scenario import Integrator, TimeUnit
 from ftcap_hil.core.status import Mode
 
 DATA = Path(str(resources.files("ftcap_hil").joinpath("data")))
@@ -73,6 +76,34 @@ def test_scenario_tables_refuse_unknown_keys(tmp_path: Path, old: str, new: str,
     assert old in EX1
     path = write(tmp_path, "scenario.toml", EX1.replace(old, new, 1))
     with raises(f"scenario.toml: {message}"):
+        load_scenario(path)
+
+
+CS2 = (DATA / "scenarios" / "cybership2-station.toml").read_text()
+
+
+@pytest.mark.parametrize("text", [EX1, CS2], ids=["plain", "realistic"])
+def test_estimation_period_s_is_read_in_any_scenario(tmp_path: Path, text: str) -> None:
+    head = "[scenario]\n"
+    assert head in text
+    path = write(tmp_path, "s.toml", text.replace(head, head + "estimation_period_s = 0.0\n", 1))
+    with raises("s.toml: [scenario] estimation_period_s: expected a finite number > 0"):
+        load_scenario(path)
+    dt = load_scenario(write(tmp_path, "ok.toml", text)).dt_s
+    ok = text.replace(head, head + f"estimation_period_s = {5 * dt!r}\n", 1)
+    assert load_scenario(write(tmp_path, "ok.toml", ok)).estimation_period_s == 5 * dt
+    bad = text.replace(head, head + f"estimation_period_s = {2.5 * dt!r}\n", 1)
+    with raises(f"s.toml: [scenario] estimation_period_s: expected a multiple of dt ({dt} s)"):
+        load_scenario(write(tmp_path, "s.toml", bad))
+
+
+@pytest.mark.parametrize("text", [EX1, CS2], ids=["plain", "realistic"])
+def test_the_old_estimation_period_key_is_an_unknown_key(tmp_path: Path, text: str) -> None:
+    head = "[scenario]\n"
+    path = write(tmp_path, "s.toml", text.replace(head, head + "estimation_period = 1.0\n", 1))
+    with raises(
+        "s.toml: [scenario] unknown key 'estimation_period' (did you mean 'estimation_period_s'?)"
+    ):
         load_scenario(path)
 
 
@@ -305,3 +336,60 @@ def test_mode_names_the_choices() -> None:
         load_mission("paper-4.2-ex1", ["mission.mode='turbo'"])
     for mode in Mode:
         assert (repr(mode.value) in str(info.value)) is (mode is not Mode.ORACLE)
+
+
+# ------------------------------------------------------------------ string switches as enums
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (
+            "[plant]",
+            '[estimator]\nkind = "kalmann"\n[plant]',
+            "[estimator] kind: 'kalmann' is not one of 'kalman', 'windowed' (did you mean",
+        ),
+        (
+            "[plant]",
+            '[estimator]\nbias_compensation = "some"\n[plant]',
+            "[estimator] bias_compensation: 'some' is not one of 'attributed', 'all'",
+        ),
+        (
+            "mass_kg = 1.1274",
+            'mass_kg = 1.1274\ninversion = "midpoint"',
+            "[plant] inversion: 'midpoint' is not one of 'euler', 'trapezoid'",
+        ),
+        (
+            'integrator = "euler"',
+            'integrator = "rk5"',
+            "[scenario] integrator: 'rk5' is not one of 'euler', 'rk4' (did you mean 'rk4'?)",
+        ),
+        (
+            'kind = "vessel"',
+            'kind = "boat"',
+            "[plant] kind: 'boat' is not one of 'linear', 'vess",
+        ),
+    ],
+)
+def test_a_bad_switch_names_file_table_key_and_choices(
+    tmp_path: Path, old: str, new: str, message: str
+) -> None:
+    assert old in EX1
+    path = write(tmp_path, "scenario.toml", EX1.replace(old, new, 1))
+    with raises(f"scenario.toml: {message}"):
+        load_scenario(path)
+
+
+def test_the_files_spelling_reads_as_the_enum(tmp_path: Path) -> None:
+    extra = '[estimator]\nkind = "windowed"\nbias_compensation = "all"\n[plant]'
+    text = EX1.replace("[plant]", extra, 1).replace('integrator = "euler"', 'integrator = "rk4"')
+    text = text.replace("mass_kg = 1.1274", 'mass_kg = 1.1274\ninversion = "trapezoid"')
+    sc = load_scenario(write(tmp_path, "scenario.toml", text))
+    assert sc.core.estimator.kind is EstimatorKind.WINDOWED
+    assert sc.core.estimator.bias_compensation is BiasCompensation.ALL
+    assert sc.integrator is Integrator.RK4 and sc.time_unit is TimeUnit.SECOND
+    assert isinstance(sc.plant, SurfaceVessel) and sc.plant.inversion is Inversion.TRAPEZOID
+    assert load_scenario("paper-4.1").time_unit is TimeUnit.STEP
+    realistic = load_scenario("cybership2-station")
+    assert realistic.integrator is Integrator.RK4
+    assert realistic.plant.inversion is Inversion.TRAPEZOID  # type: ignore[union-attr]

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from ftcap_hil.config.table_dataclass import read_dataclass
 from ftcap_hil.config.tables import Table, nearest
 from ftcap_hil.config.toml import parse_toml
 from ftcap_hil.core.errors import ConfigError, ExitCode
@@ -186,9 +187,9 @@ def test_renamed_key_and_table_name_the_new_name() -> None:
 
 def test_dataclass_reads_fields_by_their_types() -> None:
     t = table('[t]\ngain = 2\nwindow = 5\non = false\ncolour = "green"\nlimit = 0.5\n')
-    assert t.dataclass(Tunables) == Tunables(2.0, 5, False, "a", Colour.GREEN, 0.5)
+    assert read_dataclass(t, Tunables) == Tunables(2.0, 5, False, "a", Colour.GREEN, 0.5)
     t.finish()
-    assert table("[t]\n").dataclass(Tunables, defaults={"window": 9}) == Tunables(window=9)
+    assert read_dataclass(table("[t]\n"), Tunables, defaults={"window": 9}) == Tunables(window=9)
 
 
 @pytest.mark.parametrize(
@@ -203,16 +204,24 @@ def test_dataclass_reads_fields_by_their_types() -> None:
 )
 def test_dataclass_bad_values(text: str, message: str) -> None:
     with raises(message):
-        table(f"[t]\n{text}\n").dataclass(Tunables, choices={"backend": ["a", "b"]})
+        read_dataclass(table(f"[t]\n{text}\n"), Tunables, choices={"backend": ["a", "b"]})
+
+
+def test_dataclass_choices_narrow_an_enum_field_to_some_members() -> None:
+    narrowed = {"colour": [Colour.RED, Colour.BLUE]}
+    t = table('[t]\ncolour = "blue"\n')
+    assert read_dataclass(t, Tunables, choices=narrowed).colour is Colour.BLUE
+    with raises("f.toml: [t] colour: 'green' is not one of 'red', 'blue'"):
+        read_dataclass(table('[t]\ncolour = "green"\n'), Tunables, choices=narrowed)
 
 
 def test_dataclass_unknown_field_is_an_unknown_key() -> None:
     t = table("[t]\nwindw = 3\n")
-    t.dataclass(Tunables, exclude=["limit"])
+    read_dataclass(t, Tunables, exclude=["limit"])
     with raises("[t] unknown key 'windw' (did you mean 'window'?)"):
         t.finish()
     t = table("[t]\nlimit = 3\n")
-    t.dataclass(Tunables, exclude=["limit"])
+    read_dataclass(t, Tunables, exclude=["limit"])
     with raises("unknown key 'limit'"):
         t.finish()
 

@@ -13,7 +13,7 @@ from ftcap_hil.core.effectiveness.geometry import (
     effectiveness,
     paper_four_thrusters,
 )
-from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.estimation.config import EstimatorConfig, EstimatorKind
 from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.status import Mode
@@ -25,7 +25,7 @@ TRUTH = Truth(np.array([0.7, 1.0, 1.0, 0.9]), np.array([0.0, 0.005, 0.0, 0.0]))
 TAU_D = np.array([0.05, 0.02, 0.005])
 
 
-WINDOWED = EstimatorConfig(kind="windowed")
+WINDOWED = EstimatorConfig(kind=EstimatorKind.WINDOWED)
 
 
 def make(mode: Mode) -> FtcapCore:

@@ -16,6 +16,7 @@ import time
 import numpy as np
 import pytest
 
+from ftcap_hil.config.daemon import DaemonConfig
 from ftcap_hil.core.allocation.allocator import AllocationStatus
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
@@ -25,7 +26,7 @@ from ftcap_hil.core.models.plants import SurfaceVessel
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import Mailbox, Stamped
 from ftcap_hil.runtime.calls import PendingCalls
-from ftcap_hil.runtime.daemon import AllocatorDaemon, DaemonConfig, Ports
+from ftcap_hil.runtime.daemon import AllocatorDaemon, Ports
 from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.param_sync import ParamSync

@@ -6,7 +6,7 @@ import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
-from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.estimation.config import EstimatorConfig, EstimatorKind
 from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.faults import Truth
 from ftcap_hil.core.status import Mode
@@ -42,7 +42,7 @@ def test_forced_dead_is_reported_faulty_without_touching_the_state() -> None:
 def test_windowed_flags_wait_for_a_determined_estimate() -> None:
     ths = paper_four_thrusters()
     B = effectiveness(ths)
-    cfg = CoreConfig(mode=Mode.FTCAP, estimator=EstimatorConfig(kind="windowed"))
+    cfg = CoreConfig(mode=Mode.FTCAP, estimator=EstimatorConfig(kind=EstimatorKind.WINDOWED))
     core = FtcapCore(B, ths, 0.2827, cfg)
     rng = np.random.default_rng(0)
     flags = []

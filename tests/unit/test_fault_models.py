@@ -20,7 +20,6 @@ from ftcap_hil.core.faults import (
     injection_plan,
 )
 from ftcap_hil.core.messages import FaultKind
-from ftcap_hil.core.random_faults import RandomFaultSpec, random_faults
 
 F64 = np.float64
 
@@ -166,81 +165,6 @@ def test_plan_stuck_over_a_weak_thruster_returns_to_weak() -> None:
     ]
     assert math.isnan(plan[1].value)
     assert plan[2:] == [Injection(2.0, 0, FaultKind.OK), Injection(2.0, 0, FaultKind.WEAK, 0.6)]
-
-
-# --- random generator ---
-
-SPEC = RandomFaultSpec(count=(1, 3), end_probability=0.5)
-
-
-def test_random_same_seed_same_schedule() -> None:
-    a = random_faults(np.random.default_rng(42), 4, 600.0, SPEC, force_scale_n=0.1)
-    b = random_faults(np.random.default_rng(42), 4, 600.0, SPEC, force_scale_n=0.1)
-    assert a == b
-    others = {random_faults(np.random.default_rng(s), 4, 600.0, SPEC) for s in range(20)}
-    assert len(others) == 20
-
-
-def test_random_within_bounds() -> None:
-    rng = np.random.default_rng(0)
-    scale = np.array([0.1, 0.2, 10.0, 1.0])
-    kinds_seen, counts = set(), set()
-    for _ in range(500):
-        sched = random_faults(rng, 4, 600.0, SPEC, force_scale_n=scale)
-        counts.add(len(sched.events))
-        assert len({ev.thruster for ev in sched.events}) == len(sched.events)  # distinct
-        assert [ev.start for ev in sched.events] == sorted(ev.start for ev in sched.events)
-        for ev in sched.events:
-            kinds_seen.add(ev.kind)
-            assert ev.thruster is not None and 0 <= ev.thruster < 4
-            assert 120.0 <= ev.start <= 360.0  # onset (0.2, 0.6) of 600 s
-            cut = ev.kind is EventKind.INTERMITTENT and ev.end == 600.0  # needs a finite end
-            assert math.isinf(ev.end) or cut or 60.0 <= ev.end - ev.start <= 180.0
-            if ev.delta is not None:
-                assert 0.0 <= float(ev.delta) <= 0.7
-            if ev.kind is EventKind.BIAS:
-                assert 0.1 <= abs(float(ev.bias)) / scale[ev.thruster] <= 0.5  # type: ignore[arg-type]
-            if ev.kind is EventKind.RAMP:
-                assert 5.0 <= ev.ramp_s <= 30.0
-            if ev.kind is EventKind.INTERMITTENT:
-                assert ev.end <= 600.0 and 1.0 <= ev.on_s <= 5.0 and 1.0 <= ev.off_s <= 10.0
-    assert kinds_seen == set(EventKind) and counts == {1, 2, 3}
-
-
-def test_random_kinds_restrict_and_more_faults_than_thrusters() -> None:
-    spec = RandomFaultSpec(kinds=(EventKind.STUCK,), count=(5, 5))
-    sched = random_faults(np.random.default_rng(1), 3, 100.0, spec)
-    assert len(sched.events) == 5 and {ev.kind for ev in sched.events} == {EventKind.STUCK}
-    assert sched.at(99.0).stuck.any()
-
-
-def test_random_changing_one_range_changes_no_other_draw() -> None:
-    base = random_faults(np.random.default_rng(8), 4, 600.0, SPEC)
-    other = random_faults(
-        np.random.default_rng(8),
-        4,
-        600.0,
-        RandomFaultSpec(count=(1, 3), end_probability=0.5, ramp_s=(50.0, 60.0)),  # fmt: skip
-    )
-    assert [(e.start, e.thruster, e.kind) for e in base.events] == [
-        (e.start, e.thruster, e.kind) for e in other.events
-    ]
-
-
-@pytest.mark.parametrize(
-    "kw",
-    [
-        {"delta": (0.5, 1.2)},
-        {"count": (2, 1)},
-        {"onset": (0.2, 1.0)},
-        {"kinds": ()},
-        {"end_probability": 2.0},
-        {"ramp_s": (0.0, 1.0)},
-    ],  # fmt: skip
-)
-def test_random_bad_spec(kw: dict[str, object]) -> None:
-    with pytest.raises(ValueError, match="random faults"):
-        RandomFaultSpec(**kw)  # type: ignore[arg-type]
 
 
 # --- scenario files: the [[fault]] profile keys ---

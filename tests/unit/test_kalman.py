@@ -13,7 +13,7 @@ from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thru
 from ftcap_hil.core.estimation.config import EstimatorConfig, wrench_scale
 from ftcap_hil.core.estimation.decisions import FaultDecider
 from ftcap_hil.core.estimation.kalman import KalmanEstimator, VesselStep, step_model
-from ftcap_hil.core.models.plants import SurfaceVessel
+from ftcap_hil.core.models.plants import Inversion, SurfaceVessel
 
 THS = paper_four_thrusters()
 B = effectiveness(THS)
@@ -105,7 +105,7 @@ def test_the_measurement_std_must_match_the_plant() -> None:
 
 
 def test_the_vessel_step_jacobians_match_finite_differences() -> None:
-    for inversion in ("euler", "trapezoid"):
+    for inversion in Inversion:
         model = VesselStep(SurfaceVessel(inversion=inversion))
         s0, w = np.array([0.3, -0.1, 0.2]), np.array([0.05, -0.02, 0.01])
         s1, A, G = model.predict(s0, w, DT)
@@ -194,7 +194,7 @@ def test_pose_step_jacobians_match_finite_differences(preset: str, dt: float) ->
     from ftcap_hil.config.presets import load_preset
     from ftcap_hil.core.estimation.step_models import PoseStep
 
-    vessel = dataclasses.replace(load_preset(preset).vessel, inversion="trapezoid")
+    vessel = dataclasses.replace(load_preset(preset).vessel, inversion=Inversion.TRAPEZOID)
     step = PoseStep(vessel)
     scale = 1e5 if preset == "supply" else 1.0
     s0 = np.array([1.0, 2.0, 0.7, 0.3, -0.1, 0.05])
@@ -275,7 +275,7 @@ def test_damping_error_states_keep_a_moving_vessel_healthy() -> None:
     from ftcap_hil.config.presets import load_preset
 
     preset = load_preset("cybership2")
-    model = dataclasses.replace(preset.vessel, inversion="trapezoid")
+    model = dataclasses.replace(preset.vessel, inversion=Inversion.TRAPEZOID)
     truth = model.scaled(damping=0.7)
     B, ths = preset.B, preset.thrusters
     scale = wrench_scale(B, ths.u_min, ths.u_max)

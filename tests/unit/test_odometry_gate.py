@@ -8,8 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from ftcap_hil.config.daemon import OdometryLimits
 from ftcap_hil.core.messages import Odometry
-from ftcap_hil.runtime.estimation import EstimationSampler, OdometryLimits, PlausibilityGate
+from ftcap_hil.runtime.estimation import EstimationSampler, PlausibilityGate
 
 DT = 0.1
 

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ftcap_hil.core.models.controllers import PoseController, StateFeedback
-from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel, wrap_angle
+from ftcap_hil.core.models.plants import Inversion, LinearPlant, SurfaceVessel, wrap_angle
 
 
 def vec(n: int, bound: float) -> st.SearchStrategy[np.ndarray]:
@@ -42,7 +42,7 @@ def test_linear_paper_numbers() -> None:
 def test_vessel_euler_inversion_undoes_step(
     eta: np.ndarray, nu: np.ndarray, tau: np.ndarray, dt: float
 ) -> None:
-    vessel = SurfaceVessel(inversion="euler")
+    vessel = SurfaceVessel(inversion=Inversion.EULER)
     x0 = np.concatenate([eta, nu])
     x1 = vessel.step(x0, tau, dt)
     w = vessel.measured_wrench(x0, x1, dt)
@@ -55,16 +55,18 @@ def test_vessel_trapezoid_is_second_order_against_rk4() -> None:
     tau = np.array([0.1, -0.05, 0.02])
     dt = 0.2827
     errors = {}
-    for inversion in ("euler", "trapezoid"):
+    for inversion in Inversion:
         vessel = SurfaceVessel(inversion=inversion)
         x1 = vessel.step_rk4(x0, tau, dt, substeps=16)
         errors[inversion] = np.abs(vessel.measured_wrench(x0, x1, dt) - tau).max()
-    assert errors["trapezoid"] < errors["euler"] / 10
+    assert errors[Inversion.TRAPEZOID] < errors[Inversion.EULER] / 10
 
 
 def test_vessel_rejects_unknown_inversion() -> None:
     with pytest.raises(ValueError, match="inversion.*'midpoint'"):
-        SurfaceVessel(inversion="midpoint")
+        SurfaceVessel(inversion="midpoint")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="expected Inversion"):  # the enum, not its spelling
+        SurfaceVessel(inversion="euler")  # type: ignore[arg-type]
 
 
 @settings(max_examples=100, deadline=None)

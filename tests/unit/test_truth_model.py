@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from ftcap_hil.core.models.plants import SurfaceVessel
+from ftcap_hil.core.models.plants import Inversion, SurfaceVessel
 from ftcap_hil.core.models.vessel3dof import Vessel3DOF
 
 # A small made-up vessel; every expected number below is worked out by hand from it.
@@ -133,7 +133,7 @@ def test_the_papers_parameters_reproduce_surface_vessel() -> None:
     tau = np.array([0.1, -0.05, 0.02])
     np.testing.assert_allclose(v.step(x, tau, 0.1), sv.step(x, tau, 0.1), atol=1e-12)
     np.testing.assert_allclose(v.step_rk4(x, tau, 0.1), sv.step_rk4(x, tau, 0.1), atol=1e-12)
-    for inversion in ("euler", "trapezoid"):
+    for inversion in Inversion:
         a = SurfaceVessel(inversion=inversion)
         b = Vessel3DOF.from_surface_vessel(a)
         x1 = a.step_rk4(x, tau, 0.2)
@@ -178,7 +178,7 @@ def test_euler_inversion_undoes_a_step_and_trapezoid_beats_it_on_rk4() -> None:
     euler = SMALL
     x1 = euler.step(x0, tau, 0.05)
     np.testing.assert_allclose(euler.measured_wrench(x0, x1, 0.05), tau, atol=1e-12)
-    trap = dataclasses.replace(SMALL, inversion="trapezoid")
+    trap = dataclasses.replace(SMALL, inversion=Inversion.TRAPEZOID)
     x1 = SMALL.step_rk4(x0, tau, 0.2, substeps=16)
     e_euler = np.abs(euler.measured_wrench(x0, x1, 0.2) - tau).max()
     e_trap = np.abs(trap.measured_wrench(x0, x1, 0.2) - tau).max()

@@ -1,6 +1,7 @@
 """The estimators' settings and their common output: which estimator runs
-(``EstimatorKind``), its tunables (``EstimatorConfig``), one estimate (``Estimate``) and the
-wrench scale S that makes the axes commensurate."""
+(``EstimatorKind``), which bias the allocator compensates (``BiasCompensation``), the
+tunables (``EstimatorConfig``), one estimate (``Estimate``) and the wrench scale S that makes
+the axes commensurate."""
 
 from __future__ import annotations
 
@@ -9,15 +10,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ftcap_hil.core.errors import require_member
 from ftcap_hil.core.messages import FloatArray
 
 
 class EstimatorKind(enum.Enum):
     """Which estimator mode ``ftcap`` runs (``ftcap-literal`` always runs the literal one)."""
 
-    KALMAN = "kalman"
-    WINDOWED = "windowed"
-    LITERAL = "literal"
+    KALMAN = "kalman"  # core/estimation/kalman.py, core/estimation/decisions.py
+    WINDOWED = "windowed"  # windowed least squares, core/estimation/windowed.py
+
+
+class BiasCompensation(enum.Enum):
+    """Which part of the estimated bias b the allocator compensates."""
+
+    # only what core/estimation/decisions.py attributes to a thruster; the environment's
+    # share is the controller's
+    ATTRIBUTED = "attributed"
+    ALL = "all"  # the paper's model: every bias is a thruster's
 
 
 @dataclass(frozen=True)
@@ -37,8 +47,8 @@ class EstimatorConfig:
     # and the measured wrench before the fit (0: off). Off by default: it also attenuates the
     # dither and probes against model error (docs/algorithm.md, the prefilter).
     prefilter: float = 0.0
-    # --- kind = "kalman" (core/estimation/kalman.py, core/estimation/decisions.py) ---
-    kind: str = "kalman"  # "kalman" | "windowed"
+    kind: EstimatorKind = EstimatorKind.KALMAN
+    # --- kind = KALMAN (core/estimation/kalman.py, core/estimation/decisions.py) ---
     # Sensor noise std of the plant's dynamic state (u, v, r in m/s, m/s, rad/s for a
     # vessel), as the data sheet gives it; None: a noise-free world (1e-6).
     measurement_std: tuple[float, ...] | None = None
@@ -56,10 +66,7 @@ class EstimatorConfig:
     # (per sqrt(s)). Only for a vessel whose model gives D(nu) nu (Vessel3DOF).
     damping_error_std: float = 0.0
     q_damping: float = 0.001
-    # Which part of the estimated bias b the allocator compensates: "attributed" (only what
-    # core/estimation/decisions.py attributes to a thruster; the environment is the controller's) or
-    # "all" (the paper's model: every bias is a thruster's).
-    bias_compensation: str = "attributed"
+    bias_compensation: BiasCompensation = BiasCompensation.ATTRIBUTED
     q_delta: float = 0.002  # random walk of delta, per sqrt(s)
     q_bias_rel: float = 0.002  # random walk of b, fraction of S per sqrt(s)
     initial_delta_std: float = 0.05
@@ -78,13 +85,8 @@ class EstimatorConfig:
     bias_base_s: float = 60.0  # time constant of the healthy bias baseline (environment)
 
     def __post_init__(self) -> None:
-        if self.bias_compensation not in ("attributed", "all"):
-            raise ValueError(
-                "estimator.bias_compensation: expected 'attributed' or 'all', got "
-                f"{self.bias_compensation!r}"
-            )
-        if self.kind not in ("kalman", "windowed"):
-            raise ValueError(f"estimator.kind: expected 'kalman' or 'windowed', got {self.kind!r}")
+        require_member("estimator.kind", self.kind, EstimatorKind)
+        require_member("estimator.bias_compensation", self.bias_compensation, BiasCompensation)
         if self.window < 2:
             raise ValueError(f"estimator.window: need >= 2, got {self.window}")
         if not 0.0 <= self.prefilter < 1.0:

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ftcap_hil.core.estimation.config import EstimatorConfig
+from ftcap_hil.core.estimation.config import BiasCompensation, EstimatorConfig
 from ftcap_hil.core.estimation.kalman import FilterOutput, inv_small
 from ftcap_hil.core.messages import BoolArray, FloatArray
 
@@ -111,7 +111,7 @@ class FaultDecider:
         delta_alloc = np.where(self._removed, 0.0, delta_alloc)
         self._in_use = delta_alloc < 1.0
         f = np.where(self._bias_on, self._f, 0.0)
-        bf = est.bf_hat if self.config.bias_compensation == "all" else self._B @ f
+        bf = est.bf_hat if self.config.bias_compensation is BiasCompensation.ALL else self._B @ f
         return Decision(
             delta_alloc,
             f,

@@ -24,7 +24,7 @@ from typing import Protocol
 import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.models.plants import Inversion, LinearPlant, SurfaceVessel
 from ftcap_hil.core.models.vessel3dof import PlantModel, Vessel3DOF
 
 Prediction = tuple[FloatArray, FloatArray, FloatArray]  # (s1, A, G), as StepModel.predict
@@ -130,7 +130,7 @@ class VesselStep:
         self.plant = plant
         self._minv = np.asarray(np.linalg.inv(plant.mass_matrix), dtype=np.float64)
         self._inertia = np.diag(plant.mass_matrix).copy()
-        self._euler = plant.inversion == "euler"
+        self._euler = plant.inversion is Inversion.EULER
 
     def dynamic_state(self, x: FloatArray) -> FloatArray:
         """nu = [u, v, r] (3,) from x = [north, east, psi, u, v, r]."""
@@ -216,7 +216,7 @@ class PoseStep:
 
     def __init__(self, plant: SurfaceVessel | Vessel3DOF) -> None:
         self._vel = VesselStep(plant)
-        self._euler = plant.inversion == "euler"
+        self._euler = plant.inversion is Inversion.EULER
 
     def dynamic_state(self, x: FloatArray) -> FloatArray:
         """[north, east, psi, u, v, r] (6,): the full state."""

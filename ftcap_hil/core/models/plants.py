@@ -16,12 +16,22 @@ same quadratic drag, dissipative in every direction.
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from ftcap_hil.core.errors import require_member
 from ftcap_hil.core.messages import FloatArray
+
+
+class Inversion(enum.Enum):
+    """How a vessel model's ``measured_wrench`` turns one step into the constant tau that
+    made it (the string is the files' spelling)."""
+
+    EULER = "euler"  # drag and Coriolis at nu(t): the paper's discrete model, exactly
+    TRAPEZOID = "trapezoid"  # averaged over the step: second order for a continuous truth
 
 
 @dataclass(frozen=True)
@@ -51,7 +61,7 @@ class SurfaceVessel:
     beta_u: float = 0.0414
     beta_v: float = 0.0414
     beta_r: float = 0.0568
-    inversion: str = "euler"  # how measured_wrench inverts a step: "euler" | "trapezoid"
+    inversion: Inversion = Inversion.EULER  # how measured_wrench inverts a step
     k: int = 3
     state_labels: tuple[str, ...] = ("north", "east", "psi", "u", "v", "r")
 
@@ -110,8 +120,7 @@ class SurfaceVessel:
         return x
 
     def __post_init__(self) -> None:
-        if self.inversion not in ("euler", "trapezoid"):
-            raise ValueError(f"inversion: expected 'euler' or 'trapezoid', got {self.inversion!r}")
+        require_member("inversion", self.inversion, Inversion)
 
     def measured_wrench(self, x_prev: FloatArray, x_now: FloatArray, dt_s: float) -> FloatArray:
         """The constant tau that takes nu(t) to nu(t+1) in dt_s.
@@ -123,7 +132,7 @@ class SurfaceVessel:
         """
         nu0, nu1 = x_prev[3:], x_now[3:]
         inertial = np.array([self.mass_kg, self.mass_kg, self.iz_kgm2]) * (nu1 - nu0) / dt_s
-        if self.inversion == "euler":
+        if self.inversion is Inversion.EULER:
             return inertial + self.drag_and_coriolis(nu0)
         return inertial + 0.5 * (self.drag_and_coriolis(nu0) + self.drag_and_coriolis(nu1))
 

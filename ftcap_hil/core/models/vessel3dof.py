@@ -16,8 +16,9 @@ from functools import cached_property
 
 import numpy as np
 
+from ftcap_hil.core.errors import require_member
 from ftcap_hil.core.messages import FloatArray
-from ftcap_hil.core.models.plants import LinearPlant, SurfaceVessel
+from ftcap_hil.core.models.plants import Inversion, LinearPlant, SurfaceVessel
 
 DAMPING_KEYS = (
     "X_u", "Y_v", "Y_r", "N_v", "N_r", "X_uu", "X_uuu",
@@ -84,15 +85,14 @@ class Vessel3DOF:
     N_vr: float = 0.0
     N_rr: float = 0.0
     coriolis: bool = True
-    inversion: str = "euler"  # how measured_wrench inverts a step: "euler" | "trapezoid"
+    inversion: Inversion = Inversion.EULER  # how measured_wrench inverts a step
     k: int = field(default=3, init=False)
     state_labels: tuple[str, ...] = field(
         default=("north", "east", "psi", "u", "v", "r"), init=False
     )
 
     def __post_init__(self) -> None:
-        if self.inversion not in ("euler", "trapezoid"):
-            raise ValueError(f"inversion: expected 'euler' or 'trapezoid', got {self.inversion!r}")
+        require_member("inversion", self.inversion, Inversion)
         if not self.mass_kg > 0.0 or not self.iz_kgm2 > 0.0:
             raise ValueError(f"mass_kg and iz_kgm2 must be > 0, got {self.mass_kg}, {self.iz_kgm2}")
         if np.any(np.linalg.eigvalsh(0.5 * (self.mass_matrix + self.mass_matrix.T)) <= 0.0):
@@ -307,11 +307,12 @@ class Vessel3DOF:
 
     def measured_wrench(self, x_prev: FloatArray, x_now: FloatArray, dt_s: float) -> FloatArray:
         """The constant tau that takes nu(t) to nu(t+1) in dt_s, by the allocator's model:
-        it knows no current or environment (nu_c = 0, tau_env = 0). "euler" inverts ``step``
-        exactly; "trapezoid" averages n(nu) over the step (SurfaceVessel.measured_wrench)."""
+        it knows no current or environment (nu_c = 0, tau_env = 0). ``Inversion.EULER``
+        inverts ``step`` exactly; ``TRAPEZOID`` averages n(nu) over the step
+        (SurfaceVessel.measured_wrench)."""
         nu0, nu1 = x_prev[..., 3:], x_now[..., 3:]
         inertial = (nu1 - nu0) @ self.mass_matrix.T / dt_s
-        if self.inversion == "euler":
+        if self.inversion is Inversion.EULER:
             out: FloatArray = inertial + self.hydro_and_coriolis(nu0)
         else:
             out = inertial + 0.5 * (self.hydro_and_coriolis(nu0) + self.hydro_and_coriolis(nu1))

@@ -24,8 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.config.campaign import CampaignSpec, ScenarioEntry, Variant
-from ftcap_hil.config.campaign_faults import random_faults
+from ftcap_hil.config.campaign import CampaignSpec, FaultSource, ScenarioEntry, Variant
 from ftcap_hil.config.scenario import SHIPPED, parse_scenario
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.errors import ConfigError
@@ -33,6 +32,7 @@ from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.campaign_metrics import classify
 from ftcap_hil.runtime.campaign import CampaignPlan, RunTask
+from ftcap_hil.runtime.campaign_faults import random_faults
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
 
@@ -167,15 +167,16 @@ def _random_cases(
     length = _length(sc, entry.length_m)
     cases = []
     for kind in spec.faults.kinds if spec.faults.each_kind else (None,):
-        salt = [seed, zlib.crc32(entry.label.encode()), zlib.crc32((kind or "").encode())]
+        label = "" if kind is None else kind.value
+        salt = [seed, zlib.crc32(entry.label.encode()), zlib.crc32(label.encode())]
         try:
             rng = np.random.default_rng(salt)
             gen = random_faults(rng, u_range, sc.duration_s, spec.faults, kind)
         except ValueError as e:
             raise ConfigError(f"{spec.source}: scenario {entry.label}: {e}") from e
-        kinds = {g.thruster: g.kind for g in gen}
+        kinds = {g.thruster: g.kind.value for g in gen}
         tables = [t for g in gen for t in g.tables]
-        name = f"{entry.label}/s{seed}" + (f"/{kind}" if kind else "")
+        name = f"{entry.label}/s{seed}" + (f"/{label}" if label else "")
         cases.append(Case(name, entry.label, seed, False, _run_kind(kinds),
                           _with(doc, seed, tables), tuple(kinds.items()), length))  # fmt: skip
     return cases
@@ -190,10 +191,10 @@ def _entry_cases(entry: ScenarioEntry, spec: CampaignSpec) -> list[Case]:
     cases = []
     for seed in spec.seeds:
         name = f"{entry.label}/s{seed}"
-        if entry.faults == "scenario":
+        if entry.faults is FaultSource.SCENARIO:
             cases.append(Case(name, entry.label, seed, False, _run_kind(kinds),
                               _with(doc, seed, None), tuple(kinds.items()), length))  # fmt: skip
-        elif entry.faults == "none":
+        elif entry.faults is FaultSource.NONE:
             healthy = _with(doc, seed, [])
             cases.append(Case(name, entry.label, seed, True, "healthy", healthy, (), length))
         else:

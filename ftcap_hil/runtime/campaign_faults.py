@@ -23,15 +23,18 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.config.campaign import FaultSpec, Range
+from ftcap_hil.config.campaign import DrawnKind, FaultSpec, Range
 from ftcap_hil.core.messages import FloatArray
 
 
 @dataclass(frozen=True)
 class GeneratedFault:
-    thruster: int  # 0-based
-    kind: str
-    tables: tuple[dict[str, Any], ...]  # [[fault]] entries (1-based thruster)
+    """One drawn fault: its thruster (0-based), kind and ``[[fault]]`` entries (1-based
+    thruster, as a scenario file has them)."""
+
+    thruster: int
+    kind: DrawnKind
+    tables: tuple[dict[str, Any], ...]
 
 
 def _uniform(rng: np.random.Generator, r: Range) -> float:
@@ -59,7 +62,7 @@ def _intermittent(
 def one_fault(
     rng: np.random.Generator,
     i: int,
-    kind: str,
+    kind: DrawnKind,
     u_range: float,
     duration_s: float,
     spec: FaultSpec,
@@ -68,15 +71,15 @@ def one_fault(
     start = _uniform(rng, spec.onset)
     end = math.inf if spec.duration is None else start + _uniform(rng, spec.duration)
     sign = 1.0 if rng.random() < 0.5 else -1.0
-    if kind == "intermittent":
+    if kind is DrawnKind.INTERMITTENT:
         return GeneratedFault(
             i, kind, tuple(_intermittent(rng, i, start, min(end, duration_s), spec))
         )
     delta, bias = {
-        "dead": (0.0, 0.0),
-        "partial": (_uniform(rng, spec.partial_delta), 0.0),
-        "bias": (1.0, sign * _uniform(rng, spec.bias) * u_range),
-        "stuck": (0.0, sign * _uniform(rng, spec.stuck) * u_range),
+        DrawnKind.DEAD: (0.0, 0.0),
+        DrawnKind.PARTIAL: (_uniform(rng, spec.partial_delta), 0.0),
+        DrawnKind.BIAS: (1.0, sign * _uniform(rng, spec.bias) * u_range),
+        DrawnKind.STUCK: (0.0, sign * _uniform(rng, spec.stuck) * u_range),
     }[kind]
     return GeneratedFault(i, kind, (_table(i, start, end, delta, bias),))
 
@@ -86,7 +89,7 @@ def random_faults(
     u_range: FloatArray,
     duration_s: float,
     spec: FaultSpec,
-    kind: str | None = None,
+    kind: DrawnKind | None = None,
 ) -> list[GeneratedFault]:
     """``spec.count`` faults on distinct thrusters; every kind is ``kind`` if given, else
     drawn from ``spec.kinds``. u_range (m,): max |u| per thruster (N)."""

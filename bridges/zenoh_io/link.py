@@ -18,6 +18,27 @@ ZenohGcsLink           telemetry/odometry -> ``odometry`` mailbox     publish_se
 
 The config helpers (:func:`make_config`, :func:`load_config`, ...) live in
 :mod:`bridges.zenoh_io.session` and are importable from here too.
+
+With ``ros2`` settings (:class:`~bridges.zenoh_io.ros2.endpoints.Ros2Settings`) the
+allocator and the vessel are also ROS 2 nodes as rmw_zenoh sees them (``ftcap_allocator``,
+``ftcap_vessel`` in the namespace, default ``/<vessel>``), beside the JSON keys:
+
+=====================  ============================================  =========================
+link                   subscribes (-> where)                          publishes
+=====================  ============================================  =========================
+ZenohAllocatorLink     setpoint/wrench WrenchStamped                  thrusters/command
+                       -> ``ros2_setpoints``;                         Float64MultiArray,
+                       odometry Odometry -> ``ros2_odometry``;        allocator/status
+                       allocator/mode String -> ``modes``             ftcap_msgs/AllocatorStatus,
+                                                                      /diagnostics
+                                                                      DiagnosticArray
+ZenohVesselLink        fault/inject ftcap_msgs/FaultInjection         odometry Odometry
+                       -> ``faults``; thrusters/command -> ``commands``
+                       (with ``monitor_commands``)
+=====================  ============================================  =========================
+
+Separate mailboxes for the ROS 2 inputs: the vessel sends its odometry both ways, and the
+daemon takes the newest measurement over its telemetry ports (the same for setpoints).
 """
 
 from __future__ import annotations
@@ -25,6 +46,7 @@ from __future__ import annotations
 import functools
 import logging
 import math
+import time
 
 import zenoh
 
@@ -40,6 +62,10 @@ from bridges.zenoh_io.codec import (
     encode_thruster_command,
     encode_wrench_setpoint,
 )
+from bridges.zenoh_io.ros2 import messages as ros2_msg
+from bridges.zenoh_io.ros2 import std_types as ros2_types
+from bridges.zenoh_io.ros2.diagnostics import diagnostic_array
+from bridges.zenoh_io.ros2.endpoints import Ros2Publisher, Ros2Settings
 from bridges.zenoh_io.session import (
     JSON_ENCODING,
     ZenohLink,
@@ -51,7 +77,7 @@ from bridges.zenoh_io.session import (
 )
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.messages import FaultInjection, Odometry, ThrusterCommand, WrenchSetpoint
-from ftcap_hil.core.status import AllocatorStatus
+from ftcap_hil.core.status import AllocatorStatus, Mode
 from ftcap_hil.ports.mailbox import EventQueue, Mailbox
 
 __all__ = [
@@ -90,6 +116,7 @@ class ZenohAllocatorLink(ZenohLink):
         setpoints: Mailbox[WrenchSetpoint] | None = None,
         odometry: Mailbox[Odometry] | None = None,
         wrench_limit: tuple[float, float, float] | None = None,
+        ros2: Ros2Settings | None = None,
     ) -> None:
         self.wrench_limit = _check_limit(wrench_limit)
         super().__init__(vessel, config)
@@ -104,17 +131,54 @@ class ZenohAllocatorLink(ZenohLink):
         self._declare_publisher(k.thruster_command, urgent=True)
         self._declare_publisher(k.status)
         self._entities.append(self._session.declare_queryable(k.state, self._answer_state))
+        self.ros2_setpoints: Mailbox[WrenchSetpoint] = Mailbox("ros2.setpoint")
+        self.ros2_odometry: Mailbox[Odometry] = Mailbox("ros2.odometry")
+        self.modes = EventQueue[Mode]("ros2.mode")  # for the loop: daemon.set_mode
+        self._ros2: dict[str, Ros2Publisher] = {} if ros2 is None else self._declare_ros2(ros2)
+
+    def _declare_ros2(self, settings: Ros2Settings) -> dict[str, Ros2Publisher]:
+        node = self._ros2_node("ftcap_allocator", settings)
+        to_setpoint = functools.partial(ros2_msg.setpoint_from, limit=self.wrench_limit)
+        t = ros2_types
+        self._ros2_subscribe(node, "setpoint/wrench", t.WRENCH_STAMPED, to_setpoint,
+                             self.ros2_setpoints)  # fmt: skip
+        self._ros2_subscribe(node, "odometry", t.ODOMETRY, ros2_msg.odometry_from,
+                             self.ros2_odometry)  # fmt: skip
+        self._ros2_subscribe(node, "allocator/mode", t.STRING_MSG, ros2_msg.mode_from, self.modes)
+        return {
+            "command": self._ros2_publisher(node, "thrusters/command", t.FLOAT64_ARRAY),
+            "status": self._ros2_publisher(node, "allocator/status", t.ALLOCATOR_STATUS),
+            "diagnostics": self._ros2_publisher(node, "/diagnostics", t.DIAGNOSTIC_ARRAY),
+        }
+
+    @property
+    def ros2_publishers(self) -> dict[str, Ros2Publisher]:
+        """The ROS 2 publishers by role (empty without the ROS 2 mapping)."""
+        return dict(self._ros2)
 
     def publish_thruster_command(self, cmd: ThrusterCommand) -> bool:
-        """Put u (N) on ``thrusters/command``; False if it cannot be encoded or sent."""
-        return self._publish(self.keys.thruster_command, encode_thruster_command, cmd)
+        """Put u (N) on ``thrusters/command`` (and its ROS 2 topic); False if it cannot be
+        encoded or sent."""
+        sent = self._publish(self.keys.thruster_command, encode_thruster_command, cmd)
+        if "command" in self._ros2:
+            value = ros2_msg.float64_array(cmd.u.tolist(), "thrusters")
+            sent = self._publish_ros2(self._ros2["command"], value) and sent
+        return sent
 
     def publish_status(self, status: AllocatorStatus) -> bool:
-        """Publish on ``allocator/status`` and keep it as the snapshot answered to queries."""
+        """Publish on ``allocator/status`` and keep it as the snapshot answered to queries;
+        with the ROS 2 mapping also its AllocatorStatus and DiagnosticArray."""
         if not self.set_status_snapshot(status):
             return False
         assert self._snapshot is not None
-        return self._put(self.keys.status, self._snapshot)
+        sent = self._put(self.keys.status, self._snapshot)
+        if self._ros2:
+            now_s = time.time()
+            value = ros2_msg.allocator_status_msg(status, now_s)
+            sent = self._publish_ros2(self._ros2["status"], value) and sent
+            value = diagnostic_array(status, self.keys.vessel, now_s)
+            sent = self._publish_ros2(self._ros2["diagnostics"], value) and sent
+        return sent
 
     def set_status_snapshot(self, status: AllocatorStatus) -> bool:
         """Encode now (the caller may reuse its arrays) and answer queries with it."""
@@ -167,6 +231,7 @@ class ZenohVesselLink(ZenohLink):
         monitor_commands: bool = False,
         faults: EventQueue[FaultInjection] | None = None,
         commands: Mailbox[ThrusterCommand] | None = None,
+        ros2: Ros2Settings | None = None,
     ) -> None:
         super().__init__(vessel, config)
         self.faults = faults if faults is not None else EventQueue[FaultInjection]("zenoh.fault")
@@ -178,10 +243,29 @@ class ZenohVesselLink(ZenohLink):
             decode_command = functools.partial(decode_thruster_command, m=n_thrusters)
             self._subscribe(k.thruster_command, decode_command, self.commands)
         self._declare_publisher(k.odometry, urgent=True)
+        self._ros2_odometry: Ros2Publisher | None = None
+        if ros2 is not None:
+            self._declare_ros2(ros2, n_thrusters, monitor_commands)
+
+    def _declare_ros2(self, settings: Ros2Settings, m: int | None, monitor: bool) -> None:
+        node = self._ros2_node("ftcap_vessel", settings)
+        t = ros2_types
+        to_fault = functools.partial(ros2_msg.fault_from, m=m)
+        self._ros2_subscribe(node, "fault/inject", t.FAULT_INJECTION, to_fault, self.faults)
+        if monitor:
+            to_command = functools.partial(ros2_msg.thruster_command_from, m=m)
+            self._ros2_subscribe(node, "thrusters/command", t.FLOAT64_ARRAY, to_command,
+                                 self.commands)  # fmt: skip
+        self._ros2_odometry = self._ros2_publisher(node, "odometry", t.ODOMETRY)
 
     def publish_odometry(self, odom: Odometry) -> bool:
-        """Put eta (NED), nu (body) and sim time on ``telemetry/odometry``; False on failure."""
-        return self._publish(self.keys.odometry, encode_odometry, odom)
+        """Put eta (NED), nu (body) and sim time on ``telemetry/odometry`` (and as
+        nav_msgs/Odometry with the ROS 2 mapping); False on failure."""
+        sent = self._publish(self.keys.odometry, encode_odometry, odom)
+        if self._ros2_odometry is not None:
+            value = ros2_msg.odometry_msg(odom)
+            sent = self._publish_ros2(self._ros2_odometry, value) and sent
+        return sent
 
 
 class ZenohGcsLink(ZenohLink):

@@ -40,6 +40,12 @@ from bridges.zenoh_io.config import (
     role_settings,
     shipped_config_path,
 )
+from bridges.zenoh_io.ros2.endpoints import (
+    Ros2Endpoint,
+    Ros2Node,
+    Ros2Publisher,
+    Ros2Settings,
+)
 from ftcap_hil.core.errors import MalformedMessage, PortError
 from ftcap_hil.core.status import Severity
 from ftcap_hil.ports.transitions import TransitionLog, log_to
@@ -211,7 +217,14 @@ class ZenohLink:
 
         self._entities.append(self._session.declare_subscriber(key, on_sample))
 
-    def _declare_publisher(self, key: str, *, urgent: bool = False, reliable: bool = False) -> None:
+    def _declare_publisher(
+        self,
+        key: str,
+        *,
+        urgent: bool = False,
+        reliable: bool = False,
+        encoding: zenoh.Encoding = JSON_ENCODING,
+    ) -> None:
         """urgent: real-time priority, no batching, drop when congested (latest value wins)."""
         if urgent:
             priority, express = zenoh.Priority.REAL_TIME, True
@@ -220,7 +233,7 @@ class ZenohLink:
         congestion = zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
         publisher = self._session.declare_publisher(
             key,
-            encoding=JSON_ENCODING,
+            encoding=encoding,
             priority=priority,
             express=express,
             congestion_control=congestion,
@@ -236,17 +249,56 @@ class ZenohLink:
             return False
         return self._put(key, payload)
 
-    def _put(self, key: str, payload: bytes) -> bool:
+    def _put(self, key: str, payload: bytes, attachment: bytes | None = None) -> bool:
         if self._closed:
             return False
         try:
-            self._publishers[key].put(payload)
+            self._publishers[key].put(payload, attachment=attachment)
         except zenoh.ZError as e:
             self._fail(key, f"publish failed: {e}")
             return False
         if self._failing[key]:
             self._transition(key, failed=False, detail="publishing again")
         return True
+
+    # --- the ROS 2 mapping (bridges.zenoh_io.ros2): rmw_zenoh's keys, tokens, attachments
+
+    def _ros2_node(self, name: str, settings: Ros2Settings) -> Ros2Node:
+        """Declare the liveliness token of node ``name`` and return it, for its endpoints."""
+        namespace = settings.namespace_for(self.keys.vessel)
+        node = Ros2Node(settings.domain_id, str(self._session.zid()), namespace, name)
+        self._entities.append(self._session.liveliness().declare_token(node.token()))
+        return node
+
+    def _ros2_publisher(self, node: Ros2Node, topic: str, type_name: str) -> Ros2Publisher:
+        """A publisher as rmw_zenoh declares one: its token, its key (no encoding set)."""
+        pub = node.publisher(topic, type_name)
+        self._declare_publisher(pub.key, urgent=True, encoding=zenoh.Encoding.ZENOH_BYTES)
+        self._entities.append(self._session.liveliness().declare_token(pub.token))
+        return pub
+
+    def _ros2_subscribe(
+        self,
+        node: Ros2Node,
+        topic: str,
+        type_name: str,
+        convert: Callable[[Any], T],
+        sink: _Sink[T],
+    ) -> Ros2Endpoint:
+        """A subscription: its token, and samples ``convert``ed into ``sink``."""
+        sub = node.subscription(topic, type_name)
+        self._subscribe(sub.key, sub.decoder(convert), sink)
+        self._entities.append(self._session.liveliness().declare_token(sub.token))
+        return sub
+
+    def _publish_ros2(self, pub: Ros2Publisher, value: dict[str, Any]) -> bool:
+        """One sample: CDR payload and rmw_zenoh's attachment; False if it cannot be sent."""
+        try:
+            payload = pub.encode(value)
+        except (ValueError, TypeError, KeyError) as e:
+            self._fail(pub.key, f"cannot encode {pub.type_name}: {e}")
+            return False
+        return self._put(pub.key, payload, pub.next_attachment(time.time_ns()))
 
     def _fail(self, key: str, detail: str) -> None:
         self.publish_errors += 1

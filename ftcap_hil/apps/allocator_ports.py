@@ -168,17 +168,26 @@ def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Por
 
 def open_zenoh(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports) -> None:
     """The Zenoh router session's setpoints, odometry and status onto ``ports`` (unless
-    ``[zenoh] enabled = false``)."""
+    ``[zenoh] enabled = false``); with ``ros2 = true`` also its ROS 2 setpoints, odometry
+    and mode requests."""
     z_cfg = cfg.ports.zenoh
     if z_cfg is None:
         return
     from bridges.zenoh_io import link as zenoh_link
+    from bridges.zenoh_io.ros2.endpoints import Ros2Settings
     from bridges.zenoh_io.status import ZenohStatusSink
 
     conf = zenoh_link.load_config(z_cfg.config, list(z_cfg.overrides))
+    ros2 = Ros2Settings(z_cfg.domain_id, z_cfg.namespace) if z_cfg.ros2 else None
     zl = stack.enter_context(
-        zenoh_link.ZenohAllocatorLink(z_cfg.vessel, conf, wrench_limit=z_cfg.wrench_limit)
+        zenoh_link.ZenohAllocatorLink(
+            z_cfg.vessel, conf, wrench_limit=z_cfg.wrench_limit, ros2=ros2
+        )
     )
     ports.setpoints.append(zl.setpoints)
     ports.telemetry.append(zl.odometry)
+    if ros2 is not None:  # its own mailboxes: the vessel sends its odometry both ways
+        ports.setpoints.append(zl.ros2_setpoints)
+        ports.telemetry.append(zl.ros2_odometry)
+        ports.modes.append(zl.modes)
     ports.status.append(ZenohStatusSink(zl))

@@ -4,7 +4,9 @@ fly example 1 of the paper, print the results, stop everything.
 Each part is a separate process (``ftcap-hil can-hub``, ``ftcap-hil allocator``,
 ``ftcap-hil sim``, ``ftcap-hil gcs``), all on 127.0.0.1 with free ports picked at start (UDP
 for MAVLink, TCP for the CAN hub and the Zenoh router), so a demo never collides with another
-setup on the default ports. Logs: DIR/logs/<name>.log; PIDs: DIR/logs/pids.json.
+setup on the default ports; with ``--ros2`` the router is on 7447, where rmw_zenoh's nodes
+look for it, and the allocator and vessel are also on ROS 2 topics. ``--mcap``: the ground
+station also writes DIR/<mode>/run.mcap. Logs: DIR/logs/<name>.log; PIDs: DIR/logs/pids.json.
 
 Which mission: without ``--duration`` and ``--mission``, ``paper-4.2-ex1-short`` (example 1
 with the schedule compressed: faults at 12 s and 45 s, 140 s); with ``--duration S``, the
@@ -53,6 +55,7 @@ DEFAULT_MISSION = "paper-4.2-ex1-short"
 PAPER_MISSION = "paper-4.2-ex1"
 STOP_GRACE_S = 8.0
 HUB_TIMEOUT_S = 15.0
+ROS2_ROUTER_PORT = 7447  # rmw_zenoh's default router endpoint, tcp/localhost:7447
 SUPERVISE_PERIOD_NS = 200_000_000
 
 
@@ -66,6 +69,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--mission", help="a mission file or shipped name (see `ftcap-hil gcs -h`)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument(
+        "--mcap", action="store_true", help="also DIR/<mode>/run.mcap (ROS 2 messages, Foxglove)"
+    )
+    p.add_argument(
+        "--ros2",
+        action="store_true",
+        help=f"allocator and vessel also on ROS 2 topics (rmw_zenoh), router on port "
+        f"{ROS2_ROUTER_PORT}",
+    )
 
 
 @dataclass(frozen=True)
@@ -82,7 +94,7 @@ class Ports:
         return cls(gcs, allocator, vessel, free_ports(socket.SOCK_STREAM, 1)[0])
 
 
-def allocator_argv(p: Ports) -> list[str]:
+def allocator_argv(p: Ports, ros2: bool = False) -> list[str]:
     zenoh_listen = f"['listen/endpoints:[\"tcp/{LOCALHOST}:{p.zenoh}\"]']"
     sets = [
         f"can.channel={LOCALHOST}:{p.can}",
@@ -90,21 +102,25 @@ def allocator_argv(p: Ports) -> list[str]:
         f'mavlink.peers=["{LOCALHOST}:{p.gcs}"]',
         f'mavlink.relay=["{LOCALHOST}:{p.vessel}"]',  # a ground station on one link sees both
         f"zenoh.overrides={zenoh_listen}",
+        *(["zenoh.ros2=true"] if ros2 else []),
     ]
     return ftcap_argv("allocator", *[a for s in sets for a in ("--set", s)])
 
 
-def vessel_argv(p: Ports) -> list[str]:
+def vessel_argv(p: Ports, ros2: bool = False) -> list[str]:
     sets = [
         f"can.channel={LOCALHOST}:{p.can}",
         f"mavlink.connection=udpin:{LOCALHOST}:{p.vessel}",
         f'mavlink.peers=["{LOCALHOST}:{p.allocator}", "{LOCALHOST}:{p.gcs}"]',
         f"zenoh.connect=tcp/{LOCALHOST}:{p.zenoh}",
+        *(["zenoh.ros2=true"] if ros2 else []),
     ]
     return ftcap_argv("sim", *[a for s in sets for a in ("--set", s)])
 
 
-def gcs_argv(p: Ports, mission: str, out: Path, duration: float | None, plots: bool) -> list[str]:
+def gcs_argv(
+    p: Ports, mission: str, out: Path, duration: float | None, plots: bool, mcap: bool = False
+) -> list[str]:
     argv = ftcap_argv(
         "gcs",
         "--mission",
@@ -120,7 +136,7 @@ def gcs_argv(p: Ports, mission: str, out: Path, duration: float | None, plots: b
     )
     if duration is not None:
         argv += ["--duration", repr(duration)]
-    return argv + ([] if plots else ["--no-plots"])
+    return argv + ([] if plots else ["--no-plots"]) + (["--mcap"] if mcap else [])
 
 
 class Interrupted(Exception):
@@ -180,13 +196,15 @@ def start_all(
     _, channel = start_can_hub(sup.start, timeout_s=HUB_TIMEOUT_S, check=stop.check)
     ports = Ports.pick()
     hub_port = int(channel.rsplit(":", 1)[1])
-    ports = Ports(ports.gcs, ports.allocator, ports.vessel, ports.zenoh, hub_port)
+    zenoh = ROS2_ROUTER_PORT if args.ros2 else ports.zenoh  # where rmw_zenoh looks by default
+    ports = Ports(ports.gcs, ports.allocator, ports.vessel, zenoh, hub_port)
     log.info("ports on %s: %s", LOCALHOST, ports)
-    sup.start("allocator", allocator_argv(ports))  # the Zenoh router: before its client
+    sup.start("allocator", allocator_argv(ports, args.ros2))  # the Zenoh router: first
     stop.check()
-    sup.start("vessel", vessel_argv(ports))
+    sup.start("vessel", vessel_argv(ports, args.ros2))
     stop.check()
-    return sup.start("gcs", gcs_argv(ports, mission, out, args.duration, not args.no_plots))
+    argv = gcs_argv(ports, mission, out, args.duration, not args.no_plots, args.mcap)
+    return sup.start("gcs", argv)
 
 
 def expected_duration(mission: str, duration: float | None) -> float:

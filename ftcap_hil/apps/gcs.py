@@ -59,9 +59,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allocator-port", type=int, default=14570, help="the allocator's UDP inbox")
     p.add_argument("--vessel-port", type=int, default=14560, help="the vessel's UDP inbox")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument(
+        "--mcap", action="store_true", help="also DIR/<mode>/run.mcap (ROS 2 messages, Foxglove)"
+    )
 
 
-def write_outputs(rec: RunRecord, out: Path, plots: bool) -> dict[str, Any]:
+def write_outputs(rec: RunRecord, out: Path, plots: bool, mcap: bool = False) -> dict[str, Any]:
+    """results.json and timeseries.csv, the plots if ``plots``, run.mcap if ``mcap``."""
     from ftcap_hil.report.records import write_results
 
     res = write_results({rec.mode: rec}, out)
@@ -69,6 +73,10 @@ def write_outputs(rec: RunRecord, out: Path, plots: bool) -> dict[str, Any]:
         from ftcap_hil.report.plots import write_plots
 
         write_plots({rec.mode: rec}, out)
+    if mcap:
+        from ftcap_hil.report.recording import write_recordings
+
+        write_recordings({rec.mode: rec}, out)
     return res
 
 
@@ -124,12 +132,13 @@ def fly_mission(args: argparse.Namespace, mission: Mission, out: Path) -> int:
             finally:
                 station.wind_down(inject and mission.gcs.clear_faults_at_end)
     rec = recorder.finish(mode, mission.period_s, **meta(mission, flight, started))
-    res = write_outputs(rec, out, not args.no_plots)
+    res = write_outputs(rec, out, not args.no_plots, args.mcap)
     for line in summary_lines(res):
         print(line)
     print(
         f"wrote {out}/results.json, {out}/{mode}/timeseries.csv"
         + ("" if args.no_plots else " and plots")
+        + (f", {out}/{mode}/run.mcap" if args.mcap else "")
     )
     return _exit_code(flight, error, signals.stopping)
 

@@ -1,6 +1,7 @@
 """Run a scenario offline: nominal controller -> allocator core -> faulty thrusters -> plant.
 
-Writes DIR/<mode>/timeseries.csv, DIR/results.json and the PNG plots. The `none` run (no
+Writes DIR/<mode>/timeseries.csv, DIR/results.json and the PNG plots (with ``--mcap`` also
+DIR/<mode>/run.mcap, docs/ros2-and-foxglove.md). The `none` run (no
 faults) is always included: it is the reference for the deviation metrics.
 """
 
@@ -44,6 +45,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="vessel: how the estimator inverts a step",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument(
+        "--mcap", action="store_true", help="also DIR/<mode>/run.mcap (ROS 2 messages, Foxglove)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -80,10 +84,15 @@ def run(args: argparse.Namespace) -> int:
         from ftcap_hil.report.plots import write_plots
 
         write_plots(records, args.out)
+    if args.mcap:
+        from ftcap_hil.report.recording import write_recordings
+
+        write_recordings(records, args.out)
     for line in offline_summary_lines(res):
         print(line)
     print(
         f"wrote {args.out}/results.json, {len(records)} timeseries.csv"
         + ("" if args.no_plots else " and plots")
+        + (", run.mcap beside each" if args.mcap else "")
     )
     return 0

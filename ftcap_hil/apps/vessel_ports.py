@@ -90,10 +90,12 @@ class VesselPorts:
 
     def _open_zenoh(self, c: ZenohSettings, m: int) -> None:
         from bridges.zenoh_io.link import ZenohLinkError, ZenohVesselLink, load_config
+        from bridges.zenoh_io.ros2.endpoints import Ros2Settings
 
         conf = load_config(c.config, list(c.overrides))  # ZenohConfigError: a ConfigError
         try:
-            self.zenoh = ZenohVesselLink(c.vessel, conf, n_thrusters=m)
+            ros2 = Ros2Settings(c.domain_id, c.namespace) if c.ros2 else None
+            self.zenoh = ZenohVesselLink(c.vessel, conf, n_thrusters=m, ros2=ros2)
         except ZenohLinkError as e:
             raise PortError(f"zenoh: {e}") from e
         self._stack.callback(self.zenoh.shutdown)

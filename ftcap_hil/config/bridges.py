@@ -85,12 +85,17 @@ class MavlinkSettings:
 class ZenohSettings:
     """``[zenoh]`` of an enabled session: the vessel name in the key expressions, the JSON5
     file and the ``KEY:VALUE`` overrides applied to it (in order); for the allocator
-    ``wrench_limit`` (setpoints with a component beyond it are dropped as malformed)."""
+    ``wrench_limit`` (setpoints with a component beyond it are dropped as malformed).
+    ``ros2``: also the ROS 2 topics as rmw_zenoh writes them, in ``domain_id`` under
+    ``namespace`` (``""``: ``/<vessel>``; docs/ros2-and-foxglove.md)."""
 
     config: Path
     vessel: str = "ftcap1"
     overrides: tuple[str, ...] = ()
     wrench_limit: tuple[float, float, float] | None = None
+    ros2: bool = False
+    domain_id: int = 0
+    namespace: str = ""
 
 
 @dataclass(frozen=True)
@@ -173,6 +178,7 @@ def _zenoh(t: Table, default_config: str, allocator: bool) -> ZenohSettings | No
 
     if not t.boolean("enabled", True):
         t.allow("vessel", "config", "connect", "overrides", *(("wrench_limit",) * allocator))
+        t.allow(*ROS2_KEYS)
         return None
     path = zenoh_config_path(t, default_config)
     overrides = list(t.strings("overrides", ()))
@@ -190,8 +196,28 @@ def _zenoh(t: Table, default_config: str, allocator: bool) -> ZenohSettings | No
     if allocator:
         lx, ly, ln = t.vector("wrench_limit", 3, DEFAULT_WRENCH_LIMIT, positive=True)
         limit = (float(lx), float(ly), float(ln))
+    ros2, domain_id, namespace = _ros2(t)
     vessel = t.string("vessel", defaults_of(ZenohSettings)["vessel"])
-    return ZenohSettings(path, vessel, tuple(overrides), limit)
+    return ZenohSettings(path, vessel, tuple(overrides), limit, ros2, domain_id, namespace)
+
+
+ROS2_KEYS = ("ros2", "domain_id", "namespace")
+
+
+def _ros2(t: Table) -> tuple[bool, int, str]:
+    """``ros2`` (off by default), ``domain_id`` (0..232) and ``namespace`` of [zenoh]."""
+    from bridges.zenoh_io.ros2.graph import check_namespace
+
+    d = defaults_of(ZenohSettings)
+    enabled = t.boolean("ros2", d["ros2"])
+    domain_id = t.integer("domain_id", d["domain_id"], lo=0, hi=232)
+    namespace = t.string("namespace", None) or ""
+    if namespace:
+        try:
+            check_namespace(namespace)
+        except ValueError as e:
+            raise t.error("namespace", str(e)) from None
+    return enabled, domain_id, namespace
 
 
 def _can(t: Table, m: int, allocator: bool) -> CanSettings:

@@ -258,6 +258,7 @@ def _task(case: Case, variant: Variant, spec: CampaignSpec, out_dir: Path) -> tu
             variant.mode.value,
             "--out",
             str(out_dir / "replay-out" / _safe(key)),
+            "--mcap",  # the replay's run.mcap, to look at the run in Foxglove
         ]
     )
     task = RunTask(
@@ -295,7 +296,7 @@ def plan_campaign(spec: CampaignSpec, out_dir: Path) -> tuple[CampaignPlan, dict
             if name not in files:
                 head = (
                     f"# campaign {spec.name}, case {case.name}: replay a run with\n"
-                    f"#   ftcap-hil simulate THIS_FILE --mode MODE --out DIR\n"
+                    f"#   ftcap-hil simulate THIS_FILE --mode MODE --out DIR --mcap\n"
                     "# (runs.csv has the exact command of every run)\n"
                 )
                 files[name] = head + dumps_toml(doc if variant.tables else case.doc)

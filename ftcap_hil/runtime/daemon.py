@@ -6,8 +6,9 @@ reads the latest values with their ages. A cycle runs at every deadline of the f
 (``wake_on_setpoint``: the latency from a setpoint to a thruster frame is then one cycle's
 work, not up to a period; the deadlines keep their phase). Each cycle:
 
-    queued calls and hooks (parameters) -> setpoint (+ age) -> watchdogs -> estimation
-    sample from telemetry -> core.step -> thruster command -> transitions -> status
+    queued calls, mode requests and hooks (parameters) -> setpoint (+ age) -> watchdogs
+    -> estimation sample from telemetry -> core.step -> thruster command -> transitions
+    -> status
 
 Watchdogs: no setpoint for ``setpoint_timeout_s`` -> zero thrust; telemetry older than
 ``telemetry_timeout_s`` -> estimation frozen, allocation continues; an ESC silent for
@@ -36,7 +37,7 @@ from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.evidence import Evidence
 from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
-from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.ports.mailbox import EventQueue, Mailbox
 from ftcap_hil.ports.transitions import TransitionLog, log_to
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.esc_watchdog import EscStallMonitor, EscWatchdog
@@ -88,6 +89,7 @@ class Ports:
     status: list[StatusSink] = field(default_factory=list)
     esc_ages: Callable[[int], FloatArray] | None = None  # now_ns -> (m,) seconds
     esc_latest: Callable[[], Sequence[EscStatus | None]] | None = None  # per thruster
+    modes: list[EventQueue[Mode]] = field(default_factory=list)  # mode requests (ROS 2 topic)
 
     def malformed(self) -> int:
         """Malformed inputs dropped so far on every setpoint and telemetry port."""
@@ -174,6 +176,14 @@ class AllocatorDaemon:
         self.core = self._make_core(self.config.core)
         self.core.reset_command(u_prev)
 
+    def _take_mode_requests(self) -> None:
+        """Switch to each mode asked for on ``ports.modes`` (in order) that is not in force."""
+        for box in self.ports.modes:
+            for item in box.drain():
+                if item.value is not self.config.core.mode:
+                    self.set_mode(item.value)
+                    self._announce(f"mode -> {item.value.value} (requested)", Severity.INFO)
+
     def run(self, max_cycles: int | None = None) -> int:
         """Zero, cycles until ``request_exit`` / a stop signal / ``max_cycles``, zero.
         Returns the exit code (0); a second stop signal raises ``ForcedExit`` after the
@@ -195,6 +205,7 @@ class AllocatorDaemon:
 
     def _tick(self, now: int) -> None:
         self.calls.run_pending()
+        self._take_mode_requests()
         for hook in self.before_cycle:
             hook()
         self.cycle(now)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from ftcap_hil.report.recording import CHANNELS
 from ftcap_hil.runtime.processes import Child
 from tests.e2e.demo_support import (
     child_pids,
@@ -24,6 +25,7 @@ from tests.e2e.demo_support import (
     stderr_of,
     wait_for,
 )
+from tests.support.ros2_reference import read_mcap
 
 pytestmark = pytest.mark.e2e
 
@@ -42,7 +44,7 @@ class DemoRun:
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DemoRun]:
     out = tmp_path_factory.mktemp("demo") / "out"
-    argv = ftcap_hil("demo", "--duration", str(DURATION_S), "--out", str(out))
+    argv = ftcap_hil("demo", "--duration", str(DURATION_S), "--out", str(out), "--mcap")
     proc = start("demo", argv, out.parent)
     try:
         code = proc.wait(DURATION_S + 150)
@@ -193,3 +195,17 @@ def test_second_onset_flags_only_the_faulty_thrusters(tmp_path: Path) -> None:
     healthy = [(r["delta_hat_2"], r["delta_hat_4"]) for r in rows if r["t"] > 50.0]
     assert all(min(pair) > 0.85 for pair in healthy), healthy
     print(f"\nthruster 3 found dead {t_dead - 45.2:.1f} s after the second onset")
+
+
+@pytest.mark.timeout(300)
+def test_the_demos_mcap_holds_every_channel_and_the_csvs_values(demo: DemoRun) -> None:
+    assert demo.returncode == 0, demo.stderr[-3000:]
+    got = read_mcap(demo.out / "ftcap" / "run.mcap")  # CRCs checked by the mcap reader
+    assert sorted(got) == sorted(CHANNELS)
+    rows = _rows(demo.out)
+    status = [st for _, st in got["/ftcap/allocator/status"]]
+    assert len(status) == len(rows) > 0
+    for row, st, (stamp, odom) in zip(rows, status, got["/ftcap/odometry"], strict=True):
+        assert stamp == pytest.approx(row["t"] * 1e9, abs=1e3)  # the CSV has 9 digits
+        assert odom.pose.pose.position.y == pytest.approx(row["north"], rel=1e-8, abs=1e-12)
+        assert st.delta_hat[0] == pytest.approx(row["delta_hat_1"], rel=1e-8, nan_ok=True)

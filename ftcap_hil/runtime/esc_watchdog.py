@@ -17,6 +17,7 @@ made once when it starts and once when it ends.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -67,10 +68,14 @@ class EscStallMonitor:
     range: a probe is enough. A fouled or bladeless propeller still turns and is left to the
     motion-based estimate; a stuck one reports no rpm (sim/esc_model.py) like a dead one.
 
-    Only fresh telemetry counts (age below ``timeout_s``: a silent ESC is the watchdog's).
-    The command compared is the one the thrusters had when the status was measured: the
-    last command sent at least one status age ago would be exact; the one sent now is used,
-    and ``stall_s`` (default 1 s: several status periods and the thruster's lag) covers it.
+    Only fresh telemetry counts (age below ``timeout_s``: a silent ESC is the watchdog's),
+    and each status once: a status is judged when it is new (its measurement time, now minus
+    its age, later than the last one judged), against the commands that were in force over
+    the ``lag_s`` before it was measured (the ESC's and the vessel's response: a status taken
+    just after a large command change still shows the previous one). A stall needs
+    ``min_samples`` such statuses spanning ``stall_s``: a late or starved telemetry stream
+    that repeats one old status, or a status compared with a command it could not yet show,
+    is not a stall (the live loop on a loaded machine: tests/e2e/test_demo.py).
     """
 
     def __init__(
@@ -81,14 +86,28 @@ class EscStallMonitor:
         stall_s: float = 1.0,
         set_fraction: float = 0.1,
         clear_fraction: float = 0.02,
+        lag_s: float = 0.1,
+        min_samples: int = 3,
     ) -> None:
         self._transitions = transitions
         self._range = np.asarray(u_range, dtype=np.float64)
         self.stall_rpm, self.stall_s = stall_rpm, stall_s
         self.set_fraction, self.clear_fraction = set_fraction, clear_fraction
+        self.lag_s, self.min_samples = lag_s, min_samples
         m = self._range.size
-        self._since: list[int | None] = [None] * m
+        self._since: list[int | None] = [None] * m  # measurement time of the first low status
+        self._count = [0] * m  # low statuses under load since then
+        self._judged: list[int | None] = [None] * m  # measurement time of the last status judged
         self._stalled = np.zeros(m, dtype=bool)
+        self._history: deque[tuple[int, FloatArray]] = deque()  # (since, load) of the commands
+
+    def _loads(self, t0_ns: int, t1_ns: int) -> tuple[FloatArray, FloatArray]:
+        """(m,) smallest and largest load of the commands in force over [t0_ns, t1_ns]."""
+        inside = [load for since, load in self._history if t0_ns < since <= t1_ns]
+        before = [load for since, load in self._history if since <= t0_ns]
+        loads = ([before[-1]] if before else []) + inside or [self._history[0][1]]
+        stack = np.vstack(loads)
+        return stack.min(axis=0), stack.max(axis=0)
 
     def update(
         self,
@@ -98,25 +117,39 @@ class EscStallMonitor:
         ages_s: FloatArray,
         timeout_s: float,
     ) -> BoolArray:
-        """(m,) stalled thrusters after this cycle's command ``u`` (N) and the latest ESC
-        ``rpm`` with their ages (s; NaN rpm or an age beyond ``timeout_s``: no evidence)."""
+        """(m,) stalled thrusters after this cycle's command ``u`` (N, in force from
+        ``now_ns``) and the latest ESC ``rpm`` with their ages (s; NaN rpm or an age beyond
+        ``timeout_s``: no evidence)."""
         load = np.abs(np.asarray(u, dtype=np.float64)) / self._range
+        self._history.append((now_ns, load))
+        keep_ns = int((timeout_s + self.lag_s + 1.0) * 1e9)
+        while len(self._history) > 1 and self._history[1][0] < now_ns - keep_ns:
+            self._history.popleft()
         for i in range(self._range.size):
             fresh = bool(ages_s[i] <= timeout_s) and math.isfinite(float(rpm[i]))
             if not fresh:
-                self._since[i] = None
+                self._since[i], self._count[i] = None, 0
                 continue
+            measured = now_ns - int(float(ages_s[i]) * 1e9)
+            judged = self._judged[i]
+            if judged is not None and measured <= judged:
+                continue  # the status judged already: no new evidence
+            self._judged[i] = measured
+            lo, hi = self._loads(measured - int(self.lag_s * 1e9), measured)
             turning = abs(float(rpm[i])) >= self.stall_rpm
-            if turning and load[i] >= self.clear_fraction:
-                self._since[i], self._stalled[i] = None, False
-            elif not turning and load[i] >= self.set_fraction:
-                since = self._since[i]
+            since = self._since[i]
+            if turning and hi[i] >= self.clear_fraction:
+                self._since[i], self._count[i], self._stalled[i] = None, 0, False
+            elif not turning and lo[i] >= self.set_fraction:
                 if since is None:
-                    self._since[i] = now_ns
-                elif now_ns - since >= self.stall_s * 1e9:
-                    self._stalled[i] = True
+                    self._since[i], self._count[i] = measured, 1
+                else:
+                    self._count[i] += 1
+                    lasted = measured - since >= self.stall_s * 1e9
+                    if lasted and self._count[i] >= self.min_samples:
+                        self._stalled[i] = True
             elif not self._stalled[i]:
-                self._since[i] = None  # no longer loaded: the stall must be seen again
+                self._since[i], self._count[i] = None, 0  # not loaded: the stall must be seen again
             n = i + 1
             self._transitions.update(
                 f"esc-stall{n}",

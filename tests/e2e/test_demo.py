@@ -176,7 +176,8 @@ def test_second_onset_flags_only_the_faulty_thrusters(tmp_path: Path) -> None:
     assert code == 0, stderr_of(proc)[-3000:]
     log = (out / "logs" / "allocator.log").read_text()
     flagged = [ln for ln in log.splitlines() if "fault detected" in ln]
-    assert not [ln for ln in flagged if "thruster 2 " in ln or "thruster 4 " in ln], flagged
+    warned = [ln for ln in log.splitlines() if "WARNING" in ln]  # the why, if it fails
+    assert not [ln for ln in flagged if "thruster 2 " in ln or "thruster 4 " in ln], warned
     assert any("thruster 3 fault detected" in ln for ln in flagged), flagged
     # When thruster 3 is found dead depends on which way the vessel turns to psi = pi (the
     # sign of its heading error at 45 s, noise): one way its command saturates at -0.1 and

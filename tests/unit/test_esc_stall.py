@@ -73,3 +73,41 @@ def test_the_core_allocates_a_stalled_thruster_as_dead_and_reports_it() -> None:
     assert r.estimate.delta_hat[1] == 0.0 and r.allocation.dead[1]
     free = core.step(np.array([0.05, 0.0, 0.0]), None)
     assert not free.faulty.any() and not free.allocation.dead.any()
+
+
+def test_one_status_repeated_by_a_starved_stream_is_not_a_stall() -> None:
+    """The vessel's telemetry stalls after one low status (taken during a reversal): cycles
+    keep reading that status, older every time but within the timeout. One status is one
+    piece of evidence, however long it is read."""
+    mon, said = monitor()
+    u = np.full(4, 0.05)
+    rpm = np.array([800.0, 0.0, 800.0, 800.0])
+    for k in range(5):  # the same status, measured at 0 ms, read for 0.4 s
+        ages = np.full(4, 0.1 * k)
+        assert not mon.update(k * 100 * MS, u, rpm, ages, 0.5).any()
+    for k in range(5, 15):  # then new ones again, all turning: never stalled
+        rpm_now = np.full(4, 800.0)
+        assert not mon.update(k * 100 * MS, u, rpm_now, FRESH, 0.5).any()
+    assert not [s for s in said if "stalled" in s]
+
+
+def test_a_status_is_judged_against_the_commands_it_could_show() -> None:
+    """A thruster commanded from 0 to half its range: the statuses measured within lag_s of
+    the step still show the stopped shaft, and do not count; a shaft that stays stopped
+    under the command is a stall 1 s (and 3 statuses) later."""
+    mon, _ = monitor()
+    idle, on = np.zeros(4), np.full(4, 0.05)
+    zero = np.zeros(4)
+    for k in range(5):
+        mon.update(k * 100 * MS, idle, zero, FRESH, 0.5)
+    # the command steps at 500 ms; statuses come 50 ms late: the first one after the step
+    # was measured before it, the second 50 ms after it (within lag_s = 0.1 s)
+    late = np.full(4, 0.05)
+    stalled_at = None
+    for k in range(5, 30):
+        out = mon.update(k * 100 * MS, on, zero, late, 0.5)
+        if out.all() and stalled_at is None:
+            stalled_at = k * 100
+    # first status that counts: measured at 650 ms (the step at 500 ms + lag 100 ms); the
+    # stall 1 s after it, judged when the status measured at 1650 ms arrives (1700 ms)
+    assert stalled_at == 1700, stalled_at

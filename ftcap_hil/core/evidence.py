@@ -84,8 +84,8 @@ class Judged:
     allocate against; ``faulty`` (m,) the flags; ``quiet`` (m,) thrusters that get neither
     probe nor dither (commanded exactly 0); ``restorable`` (m,) thrusters the stage's
     decision removed that may come back at ``restore_at`` (m,), the stage's own delta_hat,
-    when the allocation without them falls short of the demand (never a dead one, never
-    one whose estimate is below ``dead_threshold``).
+    when the allocation without them falls short of the demand (never one the evidence
+    takes out, dead or stalled, never one whose estimate is below ``dead_threshold``).
     """
 
     estimate: Estimate
@@ -121,7 +121,7 @@ def apply_evidence(
         restorable = np.zeros(taken.shape, dtype=bool)
     else:
         usable = out.estimate.delta_hat >= dead_threshold
-        restorable = dec.removed & ~evidence.dead & usable & ~shaft_out
+        restorable = dec.removed & ~taken & usable & ~shaft_out
     return Judged(
         estimate=est,
         delta=delta,

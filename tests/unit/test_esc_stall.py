@@ -8,7 +8,10 @@ import numpy as np
 
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
-from ftcap_hil.core.evidence import Evidence
+from ftcap_hil.core.estimation.config import Estimate
+from ftcap_hil.core.estimation.decisions import Decision
+from ftcap_hil.core.estimation.stages import StageOutput
+from ftcap_hil.core.evidence import Evidence, apply_evidence
 from ftcap_hil.core.status import Mode
 from ftcap_hil.ports.transitions import TransitionLog
 from ftcap_hil.runtime.esc_watchdog import EscStallMonitor
@@ -111,3 +114,24 @@ def test_a_status_is_judged_against_the_commands_it_could_show() -> None:
     # first status that counts: measured at 650 ms (the step at 500 ms + lag 100 ms); the
     # stall 1 s after it, judged when the status measured at 1650 ms arrives (1700 ms)
     assert stalled_at == 1700, stalled_at
+
+
+def test_a_stalled_thruster_is_never_restored_when_the_demand_falls_short() -> None:
+    """The stage removed thruster 2 at an estimate above the dead threshold (0.3) and its ESC
+    shows no rpm: when the others cannot meet the demand, the removed thrusters may come back
+    at their estimate, but not one the stall evidence takes out. CI's demo run of example 1
+    commanded a stalled thruster at its -0.1 N limit through this path."""
+    m = 4
+    est = Estimate(np.array([1.0, 0.3, 1.0, 1.0]), np.zeros(3), np.zeros(m), delta_std=np.zeros(m))
+    removed = np.array([False, True, False, False])
+    dec = Decision(
+        delta_alloc=np.where(removed, 0.0, 1.0), f_alloc=np.zeros(m), bf_alloc=np.zeros(3),
+        in_use=removed, removed=removed, faulty=removed, bias_faulty=np.zeros(m, dtype=bool),
+        observable=np.ones(m, dtype=bool),
+    )  # fmt: skip
+    out = StageOutput(est, dec.delta_alloc, dec.bf_alloc, dec.faulty, decision=dec)
+    free = apply_evidence(Evidence.none(m), out, dead_threshold=0.1)
+    assert free.restorable.tolist() == [False, True, False, False]
+    seen = apply_evidence(Evidence.of(m, stalled=removed), out, dead_threshold=0.1)
+    assert not seen.restorable.any()
+    assert seen.estimate.delta_hat[1] == 0.0 and seen.delta[1] == 0.0

@@ -61,20 +61,23 @@ class MetricParams:
     used_window_s: float = 5.0  # "used" judged over this long after the onset
     tail_fraction: float = 0.25  # last part of an episode for errors and isolation
     isolation_hold: float = 0.9  # share of the tail isolated for "correct isolation"
-    recovery_hold_s: float = 2.0  # back in the allocation for this long
-    harm_ratio: float = 1.05  # harm: deviation > max(harm_ratio x CAP's, ...
-    harm_length_fraction: float = 0.01  # ... this x the vessel's length)
+    recovery_hold_s: float = 2.0  # back in the allocation, at its true effectiveness, this long
+    episode_merge_s: float = 2.0  # a false flag rising this soon after the last one fell: one
+    harm_ratio: float = 1.05  # harm: deviation > harm_ratio x max(CAP's, the oracle's)
     harm_statistic: HarmStatistic = HarmStatistic.MAX  # per phase, of the deviation
 
     def __post_init__(self) -> None:
-        for name in ("convergence_tol", "converge_hold_s", "used_window_s", "recovery_hold_s"):
+        for name in (
+            "convergence_tol", "converge_hold_s", "used_window_s", "recovery_hold_s",
+            "episode_merge_s",
+        ):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)}")
         for name in ("used_fraction", "tail_fraction", "isolation_hold"):
             if not 0 < getattr(self, name) <= 1:
                 raise ValueError(f"{name}: need (0, 1], got {getattr(self, name)}")
-        if not self.harm_ratio >= 1 or not self.harm_length_fraction >= 0:
-            raise ValueError("harm_ratio must be >= 1 and harm_length_fraction >= 0")
+        if not self.harm_ratio >= 1:
+            raise ValueError(f"harm_ratio: must be >= 1, got {self.harm_ratio}")
         if not isinstance(self.harm_statistic, HarmStatistic):
             raise ValueError(f"harm_statistic: a HarmStatistic, got {self.harm_statistic!r}")
 

@@ -8,9 +8,9 @@ allocation, the effectiveness the allocator used below its dead threshold).
 * A *fault episode* is a maximal run of cycles in which a thruster's truth is not nominal
   (delta_i != 1 or f_i != 0); it is *detectable* when its delta drops below the core's
   fault threshold; the detection reference t_d is the first such cycle.
-* Thruster i is *healthy* at k when its truth is nominal and it is not *recovering*
-  (between the end of an episode and the cycle from which its flag and its removal both
-  stay off for ``recovery_hold_s``: that time is the recovery's, below).
+* Thruster i is *healthy* at k when its truth is nominal: a flag or a removal that outlives
+  its fault (an intermittent fault's off-spell, a fault that ended) is false, as it is for
+  the boat; how long it lasts is also the recovery's (below).
 * Detection / removal delay: first cycle >= t_d with F_i / R_i, minus t_d. Isolation delay:
   first cycle >= t_d at which i is flagged or removed and no healthy thruster is.
 * Correct isolation: isolated in at least ``isolation_hold`` of the episode's tail (its
@@ -18,9 +18,13 @@ allocation, the effectiveness the allocator used below its dead threshold).
 * Time to estimate: first cycle from which |delta_hat_i - delta_i| < ``convergence_tol``
   holds for ``converge_hold_s`` (or to the episode's end).
 * Recovery (an episode that ends before the run): first cycle after the end from which the
-  thruster stays in the allocation (not R) for ``recovery_hold_s``; likewise unflagged.
-* False alarms: rising edges of F on healthy thrusters, per hour of healthy operation of the
-  whole vessel (thruster-hours healthy / m). Time flagged / removed: healthy thruster-seconds.
+  thruster stays in the allocation (not R) at its true effectiveness (|delta_hat_i - 1| <
+  ``convergence_tol``) for ``recovery_hold_s``; likewise unflagged (not F).
+* False alarms: rising edges of F on healthy thrusters; false-alarm *episodes*: the same
+  with a rise less than ``episode_merge_s`` after the thruster's previous fall merged into
+  that episode; removal *switches*: changes of R (in or out) on healthy thrusters. Rates per
+  hour of healthy operation of the whole vessel (thruster-hours healthy / m). Time flagged /
+  removed: healthy thruster-seconds.
 * Deviation: horizontal distance to the fault-free (``none``) run of the same case.
 
 A delay that never happens is None (JSON null).
@@ -125,9 +129,7 @@ def _next_starts(eps: list[Episode], n: int) -> list[int]:
 class _Run:
     """The arrays one record's metrics are computed from."""
 
-    def __init__(
-        self, rec: RunRecord, ref: Reference | None, eps: list[Episode], p: MetricParams
-    ) -> None:
+    def __init__(self, rec: RunRecord, ref: Reference | None, p: MetricParams) -> None:
         sc = rec.scenario
         self.rec, self.t, self.dt = rec, rec.t, sc.dt_s
         self.delta, self.f = _stack(rec, "delta"), _stack(rec, "f")
@@ -135,7 +137,9 @@ class _Run:
         self.flag = _stack(rec, "faulty") > 0.5
         self.dead = _stack(rec, "dead") > 0.5
         self.hold = max(1, int(round(p.recovery_hold_s / self.dt)))
-        self.healthy = (self.delta == 1.0) & (self.f == 0.0) & ~self._recovering(eps)
+        self.healthy = (self.delta == 1.0) & (self.f == 0.0)
+        self.merge = max(1, int(round(p.episode_merge_s / self.dt)))
+        self.tol = p.convergence_tol
         self.u_range = np.maximum(np.abs(sc.thrusters.u_min), np.abs(sc.thrusters.u_max))
         self.threshold = sc.core.fault_threshold
         out = self.flag | self.dead
@@ -149,16 +153,12 @@ class _Run:
         thruster stays off for the recovery hold, before ``limit``."""
         return first_held(~mask[:, ep.thruster], ep.end, limit, self.hold)
 
-    def _recovering(self, eps: list[Episode]) -> BoolArray:
-        """Cycles between a fault's end and its thruster's recovery (flag and removal both
-        off for the hold): neither fault nor healthy operation."""
-        out = np.zeros_like(self.flag)
-        for ep, limit in zip(eps, _next_starts(eps, self.t.size), strict=True):
-            if ep.end < self.t.size:
-                ends = (self.back(self.dead, ep, limit), self.back(self.flag, ep, limit))
-                until = limit if None in ends else max(e for e in ends if e is not None)
-                out[ep.end : until, ep.thruster] = True
-        return out
+    def restored(self, ep: Episode, limit: int) -> int | None:
+        """First cycle after the episode from which its thruster stays in the allocation at
+        its true effectiveness (not removed, |delta_hat - delta| < tol) for the hold."""
+        i = ep.thruster
+        good = ~self.dead[:, i] & (np.abs(self.dh[:, i] - self.delta[:, i]) < self.tol)
+        return first_held(good, ep.end, limit, self.hold)
 
     def delay(self, mask: BoolArray, a: int, b: int) -> float | None:
         hit = np.flatnonzero(mask[a:b])
@@ -176,7 +176,7 @@ def _recovery(r: _Run, ep: Episode, limit: int, p: MetricParams) -> dict[str, An
     if ep.end >= r.t.size:
         return {"ended": False, "recovery_s": None, "recovery_unflag_s": None}
     t_end = r.t[ep.end]
-    back, clear = r.back(r.dead, ep, limit), r.back(r.flag, ep, limit)
+    back, clear = r.restored(ep, limit), r.back(r.flag, ep, limit)
     return {
         "ended": True,
         "recovery_s": None if back is None else float(r.t[back] - t_end),
@@ -217,12 +217,32 @@ def fault_metrics(r: _Run, ep: Episode, limit: int, p: MetricParams) -> dict[str
     return out
 
 
+def _episode_count(mask: BoolArray, healthy: BoolArray, merge: int) -> int:
+    """Rising edges of ``mask`` (one thruster) on healthy cycles, a rise less than ``merge``
+    cycles after the previous fall counting with that episode."""
+    count, last_fall = 0, None
+    for a, b in runs_of(mask):
+        if healthy[a] and (last_fall is None or a - last_fall >= merge):
+            count += 1
+        last_fall = b
+    return count
+
+
+def _switches(mask: BoolArray, healthy: BoolArray) -> int:
+    """Changes of ``mask`` (one thruster, either way) at healthy cycles."""
+    change = np.flatnonzero(np.diff(mask.astype(np.int8))) + 1
+    return int(np.sum(healthy[change]))
+
+
 def healthy_metrics(r: _Run) -> dict[str, Any]:
-    """False alarms and time flagged / removed of healthy thrusters (module docstring)."""
+    """False alarms, their episodes, removal switches and time flagged / removed of healthy
+    thrusters (module docstring)."""
     h, m = r.healthy, r.healthy.shape[1]
     prev = np.vstack([np.zeros((1, m), dtype=bool), r.flag[:-1]])
     alarms = int(np.sum(r.flag & ~prev & h))
     removals = int(np.sum(r.dead & ~np.vstack([prev[:1], r.dead[:-1]]) & h))
+    episodes_ = sum(_episode_count(r.flag[:, i], h[:, i], r.merge) for i in range(m))
+    switches = sum(_switches(r.dead[:, i], h[:, i]) for i in range(m))
     healthy_s = float(np.sum(h)) * r.dt
     hours = healthy_s / m / 3600.0
     flagged_s = float(np.sum(r.flag & h)) * r.dt
@@ -231,8 +251,12 @@ def healthy_metrics(r: _Run) -> dict[str, Any]:
         "healthy_hours": hours,
         "healthy_thruster_s": healthy_s,
         "false_alarms": alarms,
+        "false_alarm_episodes": episodes_,
         "false_removals": removals,
+        "removal_switches": switches,
         "false_alarm_rate_per_h": alarms / hours if hours > 0 else None,
+        "false_alarm_episodes_per_h": episodes_ / hours if hours > 0 else None,
+        "removal_switches_per_h": switches / hours if hours > 0 else None,
         "healthy_flagged_s": flagged_s,
         "healthy_removed_s": removed_s,
         "healthy_flagged_frac": flagged_s / healthy_s if healthy_s > 0 else None,
@@ -266,7 +290,7 @@ def run_metrics(
     """The metrics of one run: scalars, ``phases`` (deviation per fault phase) and
     ``faults`` (one row per episode). ref: the fault-free run (None: no deviation)."""
     eps = episodes(rec, kinds)
-    r = _Run(rec, ref, eps, params)
+    r = _Run(rec, ref, params)
     k = rec.scenario.B.shape[0]
     gap = _stack_k(rec, "v_dem", k) - _stack_k(rec, "v_ach", k)
     limits = _next_starts(eps, r.t.size)

@@ -27,36 +27,34 @@ RUN_COLUMNS = (
     ("kind", "kind"),
     ("runs", "runs"),
     ("failed", "failed"),
+    ("healthy h", "healthy_hours"),
     ("dev/oracle med", "dev_ratio_oracle_median"),
-    ("dev/oracle p95", "dev_ratio_oracle_p95"),
     ("dev/CAP med", "dev_ratio_cap_median"),
     ("dev/CAP p95", "dev_ratio_cap_p95"),
     ("dev rms med (m)", "deviation_rms_median"),
-    ("unalloc. rms med", "unallocated_rms_median"),
-    ("false alarms /h", "false_alarm_rate_per_h"),
+    ("false-alarm episodes /h [95 %]", "false_alarm_episodes_per_h"),
+    ("removal switches /h [95 %]", "removal_switches_per_h"),
     ("healthy flagged", "healthy_flagged_frac"),
     ("healthy removed", "healthy_removed_frac"),
     ("min healthy delta-hat", "healthy_delta_hat_min"),
-    ("harm runs", "harm_runs"),
+    ("harm runs [95 %]", "harm_share"),
 )
 FAULT_COLUMNS = (
     ("mode", "mode"),
     ("kind", "kind"),
     ("faults", "faults"),
     ("detectable", "detectable"),
-    ("detected", "detection_rate"),
+    ("detected [95 %]", "detected_share"),
     ("det. med (s)", "detection_delay_median"),
-    ("det. p95", "detection_delay_p95"),
     ("iso. med (s)", "isolation_delay_median"),
     ("iso. p95", "isolation_delay_p95"),
-    ("iso. used med", "isolation_delay_used_median"),
-    ("iso. used p95", "isolation_delay_used_p95"),
+    ("iso. <= 5 s", "isolated_5s_share"),
+    ("iso. <= 30 s", "isolated_30s_share"),
+    ("never iso.", "never_isolated_share"),
     ("correct iso.", "correct_isolation_rate"),
-    ("removal med", "removal_delay_median"),
     ("delta err med", "delta_error_median"),
-    ("delta err p95", "delta_error_p95"),
     ("to 0.1 med (s)", "converge_median"),
-    ("to 0.1 p95", "converge_p95"),
+    ("recovered", "recovered_share"),
     ("recovery med (s)", "recovery_median"),
     ("recovery p95", "recovery_p95"),
 )
@@ -65,6 +63,12 @@ PERCENT = {
     "healthy_removed_frac",
     "detection_rate",
     "correct_isolation_rate",
+    "detected_share",
+    "isolated_5s_share",
+    "isolated_30s_share",
+    "never_isolated_share",
+    "recovered_share",
+    "harm_share",
 }
 
 
@@ -83,10 +87,22 @@ def fmt(value: Any, key: str = "") -> str:
     return str(value)
 
 
+def cell(row: Row, key: str) -> str:
+    """``row[key]`` as :func:`fmt` writes it; a value with its 95 % interval (``key_lo``,
+    ``key_hi``, ``key_n`` beside it) as ``value [lo, hi] (n)``: for a share, n is the
+    trials; for a rate, the events."""
+    text = fmt(row.get(key), key)
+    if f"{key}_lo" not in row or row.get(key) is None:
+        return text
+    low, high = fmt(row[f"{key}_lo"], key), fmt(row[f"{key}_hi"], key)
+    return f"{text} [{low}, {high}] ({row[f'{key}_n']})"
+
+
 def markdown_table(rows: Sequence[Row], columns: Sequence[tuple[str, str]]) -> list[str]:
+    """A Markdown table of ``rows``, one column per (header, key) of ``columns``."""
     lines = ["| " + " | ".join(h for h, _ in columns) + " |"]
     lines.append("|" + "|".join("---" for _ in columns) + "|")
-    lines += ["| " + " | ".join(fmt(r.get(k), k) for _, k in columns) + " |" for r in rows]
+    lines += ["| " + " | ".join(cell(r, k) for _, k in columns) + " |" for r in rows]
     return lines
 
 
@@ -119,7 +135,8 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "Definitions of every column: docs/campaigns.md. Ratios: the run's deviation from its "
         "fault-free run (RMS over the run) over the oracle's / CAP's in the same case. "
         "Delays count from the fault's detectable onset; a fault never detected counts as "
-        "'never' (infinite) in the percentiles.",
+        "'never' (infinite) in the percentiles. [95 %]: the exact Poisson interval of a rate "
+        "(n: events) or the Wilson interval of a share (n: trials).",
         "",
         "## Runs per mode and fault kind",
         "",
@@ -132,8 +149,8 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         f"## Harm ({len(harm)} run phases)",
         "",
         f"A run phase where a mode's {params.harm_statistic.value} deviation exceeds "
-        f"max({params.harm_ratio:g} x CAP's, {params.harm_length_fraction:g} x the vessel's "
-        "length).",
+        f"{params.harm_ratio:g} x the larger of CAP's and the oracle's in the same phase "
+        "(no floor; a healthy case's reference is its fault-free run, 0 m).",
         "",
         *(
             markdown_table(
@@ -143,6 +160,10 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
                     ("phase", "phase"),
                     ("dev max (m)", "deviation_max"),
                     ("dev rms (m)", "deviation_rms"),
+                    ("CAP (m)", "cap_m"),
+                    ("oracle (m)", "oracle_m"),
+                    ("dev/CAP", "dev_ratio_cap"),
+                    ("dev/oracle", "dev_ratio_oracle"),
                     ("replay", "replay"),
                 ],
             )

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.config.campaign import MetricParams
+from ftcap_hil.report.intervals import Interval, poisson_rate, wilson_share
 
 REFERENCE_MODES = ("none", "cap")
 Row = dict[str, Any]
@@ -39,24 +40,39 @@ def _ratio(a: float | None, b: float | None) -> float | None:
     return a / b
 
 
-def _harm(row: Row, cap: Row | None, p: MetricParams) -> tuple[bool | None, list[int]]:
-    """Phases (indices) where the run deviates more than max(ratio x CAP, floor)."""
-    floor = p.harm_length_fraction * row["length_m"]
+def _phase_ref(run: Row | None, j: int, stat: str) -> float | None:
+    """A reference run's statistic ``stat`` in phase ``j`` (None: no such run or value)."""
+    return None if run is None else run["phases"][j][stat]
+
+
+def _harm(
+    row: Row, cap: Row | None, oracle: Row | None, p: MetricParams
+) -> tuple[bool | None, list[int], list[Row]]:
+    """Phases (indices) where the run deviates more than ``harm_ratio`` x the larger of CAP's
+    and the oracle's deviation in that phase, no floor; and per phase the ratios to each
+    and the metres. A healthy case without its CAP run: CAP is the fault-free run, 0 m."""
     stat = f"deviation_{p.harm_statistic.value}"
     if cap is None and not row["healthy"]:
-        return None, []
-    phases = []
+        return None, [], []
+    phases, detail = [], []
     for j, ph in enumerate(row["phases"]):
-        ref = 0.0 if cap is None else cap["phases"][j][stat]
-        if ph[stat] is None or ref is None:
-            return None, []
-        if ph[stat] > max(p.harm_ratio * ref, floor):
+        c = 0.0 if cap is None else _phase_ref(cap, j, stat)
+        o = _phase_ref(oracle, j, stat)
+        if ph[stat] is None or c is None:
+            return None, [], []
+        best = max(c, o) if o is not None else c
+        detail.append(
+            {"deviation_m": ph[stat], "cap_m": c, "oracle_m": o,
+             "dev_ratio_cap": _ratio(ph[stat], c), "dev_ratio_oracle": _ratio(ph[stat], o)}
+        )  # fmt: skip
+        if ph[stat] > p.harm_ratio * best:
             phases.append(j)
-    return bool(phases), phases
+    return bool(phases), phases, detail
 
 
 def derive(rows: Iterable[Row], params: MetricParams) -> list[Row]:
-    """Rows with ``dev_ratio_oracle``, ``dev_ratio_cap``, ``harm`` and ``harm_phases``."""
+    """Rows with ``dev_ratio_oracle``, ``dev_ratio_cap``, ``harm``, ``harm_phases`` and
+    ``harm_detail`` (per phase: the metres and the ratios to CAP and the oracle)."""
     rows = latest(rows)
     by_case: dict[str, dict[str, Row]] = defaultdict(dict)
     for row in rows:
@@ -73,7 +89,9 @@ def derive(rows: Iterable[Row], params: MetricParams) -> list[Row]:
             )
             row["dev_ratio_cap"] = _ratio(row["deviation_rms"], (cap or {}).get("deviation_rms"))
             if row["mode"] not in REFERENCE_MODES:
-                row["harm"], row["harm_phases"] = _harm(row, cap, params)
+                row["harm"], row["harm_phases"], row["harm_detail"] = _harm(
+                    row, cap, oracle, params
+                )
         out.append(row)
     return out
 
@@ -103,6 +121,20 @@ def _q(values: list[float], q: float) -> float | None:
 def _delays(rows: list[Row], key: str, keep: Callable[[Row], bool]) -> list[float]:
     """Values of ``key`` for the rows kept; a delay that never came counts as infinite."""
     return [math.inf if r[key] is None else r[key] for r in rows if keep(r)]
+
+
+def _put(row: Row, name: str, iv: Interval) -> None:
+    """``name`` with its 95 % interval (``_lo``, ``_hi``) and sample size (``_n``: events
+    or trials) into ``row``; None where nothing was measured."""
+
+    def num(x: float) -> float | None:
+        return x if math.isfinite(x) else None
+
+    row[name], row[f"{name}_lo"], row[f"{name}_hi"] = num(iv.value), num(iv.low), num(iv.high)
+    row[f"{name}_n"] = iv.n
+
+
+ISOLATION_WITHIN_S = (5.0, 30.0)  # the shares isolated within these delays (and never)
 
 
 def _rate(rows: list[Row], key: str) -> float | None:
@@ -156,6 +188,14 @@ def run_groups(rows: list[Row]) -> list[Row]:
                 "harm_runs": sum(1 for r in ok if r.get("harm")),
             }
         )
+        row = out[-1]
+        row["healthy_hours"] = hours
+        events = sum(r.get("false_alarm_episodes", 0) for r in ok)
+        _put(row, "false_alarm_episodes_per_h", poisson_rate(events, hours))
+        switches = sum(r.get("removal_switches", 0) for r in ok)
+        _put(row, "removal_switches_per_h", poisson_rate(switches, hours))
+        judged = [r for r in ok if r.get("harm") is not None]
+        _put(row, "harm_share", wilson_share(sum(bool(r["harm"]) for r in judged), len(judged)))
     return out
 
 
@@ -186,6 +226,15 @@ def fault_groups(faults: list[Row]) -> list[Row]:
         }
         for name, values in series.items():
             row[f"{name}_median"], row[f"{name}_p95"] = _q(values, 50), _q(values, 95)
+        _put(row, "detected_share", wilson_share(hits, len(det)))
+        iso = series["isolation_delay"]
+        for limit in ISOLATION_WITHIN_S:
+            within = sum(d <= limit for d in iso)
+            _put(row, f"isolated_{limit:g}s_share", wilson_share(within, len(iso)))
+        _put(row, "never_isolated_share", wilson_share(sum(math.isinf(d) for d in iso), len(iso)))
+        ended = [r for r in g if r["ended"]]
+        back = sum(r["recovery_s"] is not None for r in ended)
+        _put(row, "recovered_share", wilson_share(back, len(ended)))
         out.append(row)
     return out
 
@@ -195,13 +244,17 @@ def harm_list(rows: list[Row]) -> list[Row]:
     out = []
     for row in rows:
         for j in row.get("harm_phases") or []:
-            ph = row["phases"][j]
+            ph, d = row["phases"][j], row["harm_detail"][j]
             out.append(
                 {
                     "key": row["key"],
                     "phase": f"[{ph['start_s']:g}, {ph['end_s']:g}) s",
                     "deviation_max": ph["deviation_max"],
                     "deviation_rms": ph["deviation_rms"],
+                    "cap_m": d["cap_m"],
+                    "oracle_m": d["oracle_m"],
+                    "dev_ratio_cap": d["dev_ratio_cap"],
+                    "dev_ratio_oracle": d["dev_ratio_oracle"],
                     "replay": row["replay"],
                 }
             )

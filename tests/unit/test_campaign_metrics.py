@@ -27,6 +27,7 @@ from ftcap_hil.report.campaign_metrics import (
     reference_of,
     run_metrics,
 )
+from ftcap_hil.report.campaign_report import cell
 from ftcap_hil.report.campaign_summary import derive, fault_groups, fault_rows, run_groups
 from ftcap_hil.report.records import RunRecord, column_names
 from ftcap_hil.runtime.offline import run_mode
@@ -153,23 +154,74 @@ def test_recovery_after_an_intermittent_fault_ends() -> None:
     assert fault["end_s"] == pytest.approx(20.0)
     assert fault["recovery_s"] == pytest.approx(3.0)
     assert fault["recovery_unflag_s"] == pytest.approx(5.0)
-    # until 25 s thruster 2 is recovering: neither faulty nor healthy time
-    assert out["healthy_hours"] == pytest.approx((4 * 60.0 - 10.0 - 5.0) / 4 / 3600)
-    assert out["healthy_flagged_s"] == 0.0 and out["false_alarms"] == 0
-    rec.set("faulty_2", 40.0, 41.0, 1.0)  # once recovered, a flag is a false alarm again
+    # from 20 s thruster 2 is healthy: its 5 s of flag and 3 s of removal after the fault
+    # are false (the off-spell of an intermittent fault), no rising edge though
+    assert out["healthy_hours"] == pytest.approx((4 * 60.0 - 10.0) / 4 / 3600)
+    assert out["healthy_flagged_s"] == pytest.approx(5.0)
+    assert out["healthy_removed_s"] == pytest.approx(3.0)
+    assert out["false_alarms"] == 0 and out["removal_switches"] == 1  # back in at 23 s
+    rec.set("faulty_2", 40.0, 41.0, 1.0)  # a new flag is a false alarm
     out = run_metrics(rec.record(), None, PARAMS, kinds={1: "intermittent"})
-    assert out["false_alarms"] == 1 and out["healthy_flagged_s"] == pytest.approx(1.0)
+    assert out["false_alarms"] == 1 and out["healthy_flagged_s"] == pytest.approx(6.0)
 
 
-def test_a_thruster_that_never_recovers_is_never_healthy_again() -> None:
+def test_off_spells_flagged_throughout_are_false_and_no_recovery() -> None:
+    """An intermittent fault (dead 5 s, healthy 5 s) whose flag never clears: under the old
+    definition every off-spell was 'recovering' and none of it counted; now each off-spell
+    is 5 s flagged on a healthy thruster, and no episode recovers."""
+    rec = Synthetic(60.0)
+    for k in range(5):
+        rec.set("delta_2", 10.0 + 10 * k, 15.0 + 10 * k, 0.0)
+    rec.set("faulty_2", 10.5, math.inf, 1.0)
+    rec.set("delta_hat_2", 10.5, math.inf, 0.0)
+    out = run_metrics(rec.record(), None, PARAMS, kinds={1: "intermittent"})
+    assert len(out["faults"]) == 5
+    ended = [f for f in out["faults"] if f["ended"]]
+    assert ended and all(f["recovery_s"] is None for f in ended)
+    assert out["healthy_flagged_s"] == pytest.approx(5 * 5.0 - 0.0)  # 15-20, ..., 55-60
+    assert out["false_alarms"] == 0  # one rising edge, during the first dead spell
+
+
+def test_recovery_needs_the_true_effectiveness_not_only_the_allocation() -> None:
+    """A fault that ends: the thruster is back in the allocation at 21 s, but the estimate
+    sits at 0.5 (the allocator uses half of it) until 30 s: recovered at 30 s, not 21 s."""
+    rec = Synthetic(60.0)
+    rec.set("delta_2", 10.0, 20.0, 0.0)
+    rec.set("delta_hat_2", 10.0, 21.0, 0.0)
+    rec.set("delta_hat_2", 21.0, 30.0, 0.5)
+    rec.set("dead_2", 10.5, 21.0, 1.0)
+    (fault,) = run_metrics(rec.record(), None, PARAMS)["faults"]
+    assert fault["recovery_s"] == pytest.approx(10.0)
+
+
+def test_a_chattering_healthy_thruster_counts_switches_and_merged_episodes() -> None:
+    """A healthy thruster removed and returned 40 times, 0.3 s in, 0.7 s out (1 s period):
+    12 s removed in 60 s is a small time share, but 80 removal switches; the 40 flags that
+    go with it are 40 false alarms and 1 false-alarm episode (each rise within 2 s of the
+    last fall), and a flag 10 s after the last is a second episode."""
+    rec = Synthetic(60.0)
+    for k in range(40):
+        rec.set("dead_3", 10.0 + k, 10.3 + k, 1.0)
+        rec.set("faulty_3", 10.0 + k, 10.3 + k, 1.0)
+    rec.set("faulty_3", 59.0, 59.5, 1.0)
+    out = run_metrics(rec.record(), None, PARAMS)
+    assert out["removal_switches"] == 80
+    assert out["false_alarms"] == 41 and out["false_alarm_episodes"] == 2
+    assert out["healthy_removed_s"] == pytest.approx(12.0)
+    hours = 60.0 / 3600
+    assert out["removal_switches_per_h"] == pytest.approx(80 / hours)
+
+
+def test_a_thruster_that_never_recovers_is_removed_on_healthy_time() -> None:
     rec = Synthetic(60.0)
     rec.set("delta_2", 10.0, 20.0, 0.0)
     rec.set("dead_2", 10.5, math.inf, 1.0)
-    rec.set("faulty_1", 30.0, 31.0, 1.0)  # another thruster's false alarm still counts
+    rec.set("faulty_1", 30.0, 31.0, 1.0)  # another thruster's false alarm counts too
     out = run_metrics(rec.record(), None, PARAMS)
     assert out["faults"][0]["recovery_s"] is None
-    assert out["healthy_removed_s"] == 0.0 and out["false_alarms"] == 1
-    assert out["healthy_hours"] == pytest.approx((4 * 60.0 - 50.0) / 4 / 3600)
+    assert out["healthy_removed_s"] == pytest.approx(40.0) and out["false_alarms"] == 1
+    assert out["false_removals"] == 0  # it was removed while faulty
+    assert out["healthy_hours"] == pytest.approx((4 * 60.0 - 10.0) / 4 / 3600)
 
 
 def test_deviation_from_the_reference_and_the_used_test() -> None:
@@ -209,19 +261,23 @@ def _row(variant: str, phase_max: list[float], rms: float, healthy: bool = False
     }
 
 
-def test_harm_is_a_phase_worse_than_1_05_x_cap_and_1_percent_of_the_length() -> None:
+def test_harm_is_a_phase_worse_than_1_05_x_the_better_of_cap_and_the_oracle() -> None:
     rows = [
-        _row("cap", [0.01, 0.02, 0.001], 0.02),
-        _row("oracle", [0.005, 0.01, 0.0], 0.01),
-        # 1.05 x CAP exactly (no harm); 1.5 x CAP (harm); 4 x CAP but under 3 mm (no harm)
-        _row("ftcap", [0.0105, 0.03, 0.0029], 0.03),
+        _row("cap", [0.01, 0.02, 0.001, 0.01], 0.02),
+        _row("oracle", [0.005, 0.01, 0.0, 0.02], 0.01),
+        # 1.05 x CAP exactly (no harm); 1.5 x CAP (harm); 2.9 x CAP, 2.9 mm: harm (the old
+        # floor, 1 % of the 0.3 m hull, hid it); 1.5 x CAP but under 1.05 x the oracle: none
+        _row("ftcap", [0.0105, 0.03, 0.0029, 0.015], 0.03),
     ]
     out = {r["variant"]: r for r in derive(rows, PARAMS)}
-    assert out["ftcap"]["harm"] is True and out["ftcap"]["harm_phases"] == [1]
+    assert out["ftcap"]["harm"] is True and out["ftcap"]["harm_phases"] == [1, 2]
     assert out["ftcap"]["dev_ratio_oracle"] == pytest.approx(3.0)
     assert out["ftcap"]["dev_ratio_cap"] == pytest.approx(1.5)
+    detail = out["ftcap"]["harm_detail"][3]
+    assert detail["dev_ratio_cap"] == pytest.approx(1.5)
+    assert detail["dev_ratio_oracle"] == pytest.approx(0.75)
     assert "harm" not in out["cap"]  # CAP is the reference
-    healthy = derive([_row("ftcap", [0.0031, 0.001], 0.001, healthy=True)], PARAMS)[0]
+    healthy = derive([_row("ftcap", [0.0031, 0.0], 0.001, healthy=True)], PARAMS)[0]
     assert healthy["harm"] is True and healthy["harm_phases"] == [0]  # against CAP = 0
     assert healthy["dev_ratio_cap"] is None  # no CAP run, and its deviation would be 0
 
@@ -291,6 +347,53 @@ def test_run_groups_pool_false_alarms_over_healthy_hours() -> None:
     (g, _) = [g for g in run_groups(rows) if g["kind"] in ("healthy", "all")]
     assert g["runs"] == 3 and g["false_alarm_rate_per_h"] == pytest.approx(1.0)
     assert g["healthy_flagged_frac"] == pytest.approx(36.0 / (4 * 3600.0))
+
+
+def test_run_groups_give_episode_and_switch_rates_with_their_intervals() -> None:
+    """3 healthy hours, 3 false-alarm episodes, 0 removal switches: 1.0 /h in the exact
+    Poisson interval [0.206, 2.92] /h, and 0 /h with an upper bound of 3.69 / 3 h."""
+    rows = [
+        {
+            "key": f"k{j}", "case": f"c{j}", "variant": "ftcap", "mode": "ftcap",
+            "kind": "healthy", "status": "ok", "duration_s": 3600.0, "healthy_hours": 1.0,
+            "healthy_thruster_s": 4 * 3600.0, "false_alarms": 5, "false_alarm_episodes": 1,
+            "removal_switches": 0, "healthy_flagged_s": 0.0, "healthy_removed_s": 0.0,
+            "deviation_rms": 0.0, "harm": j == 0,
+        }
+        for j in range(3)
+    ]  # fmt: skip
+    (g,) = [g for g in run_groups(rows) if g["kind"] == "healthy"]
+    assert g["false_alarm_episodes_per_h"] == pytest.approx(1.0)
+    assert g["false_alarm_episodes_per_h_lo"] == pytest.approx(0.2063, abs=1e-3)
+    assert g["false_alarm_episodes_per_h_hi"] == pytest.approx(2.9224, abs=1e-3)
+    assert g["false_alarm_episodes_per_h_n"] == 3
+    assert g["removal_switches_per_h"] == 0.0
+    assert g["removal_switches_per_h_hi"] == pytest.approx(3.6889 / 3, abs=1e-3)
+    assert g["harm_share"] == pytest.approx(1 / 3) and g["harm_share_n"] == 3
+    assert cell(g, "false_alarm_episodes_per_h") == "1 [0.206, 2.92] (3)"
+    assert cell(g, "harm_share") == "33.3 % [6.15 %, 79.2 %] (3)"
+    assert cell(g, "runs") == "3"
+
+
+def test_fault_groups_give_isolation_shares_and_recovery() -> None:
+    """Four dead faults isolated after 2 s, 10 s, 40 s and never; two of them ended, one
+    came back: within 5 s 1/4, within 30 s 2/4, never 1/4, recovered 1/2."""
+    base = {"key": "k", "case": "c", "scenario": "s", "seed": 0, "variant": "ftcap",
+            "mode": "ftcap", "kind": "dead", "status": "ok"}  # fmt: skip
+    faults = [
+        {"kind": "dead", "detectable": True, "used": True, "detection_delay_s": d,
+         "isolation_delay_s": d, "removal_delay_s": d, "correct_isolation": d is not None,
+         "delta_error": 0.0, "converge_s": d, "ended": ended, "recovery_s": back}
+        for d, ended, back in ((2.0, True, 1.5), (10.0, True, None), (40.0, False, None),
+                               (None, False, None))
+    ]  # fmt: skip
+    groups = fault_groups(fault_rows([{**base, "faults": faults}]))
+    (g,) = [g for g in groups if g["kind"] == "dead"]
+    assert g["isolated_5s_share"] == pytest.approx(0.25)
+    assert g["isolated_30s_share"] == pytest.approx(0.5)
+    assert g["never_isolated_share"] == pytest.approx(0.25) and g["never_isolated_share_n"] == 4
+    assert g["recovered_share"] == pytest.approx(0.5) and g["recovered_share_n"] == 2
+    assert g["recovery_median"] == math.inf  # one of the two never came back
 
 
 def test_first_held_and_classify() -> None:

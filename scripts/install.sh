@@ -8,6 +8,9 @@ export PIP_DISABLE_PIP_VERSION_CHECK=1
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/pip install -q --upgrade pip
 .venv/bin/pip install -q -c docker/requirements.lock -e '.[test]'
+# What this venv was installed from (the lock's digest): tests/docker judges the installed
+# versions against the lock only in an environment that says it came from the lock.
+sha256sum docker/requirements.lock > .venv/ftcap-installed-from.lock.sha256
 # MAVProxy for the ground-station interop test. Its hard dependencies include opencv and vtk
 # (hundreds of MB, for map/GUI modules we never load): installed without them, plus the two
 # small packages its param/cmdlong/misc modules need.

@@ -10,11 +10,13 @@
   the shared namespace and only for the ports published; CAN on loopback;
 * the Zenoh files: the router's only departure from the product's policy is its listen on
   0.0.0.0 inside its container; the clients pass the product's own check as they are;
-* docker/requirements.lock equals what docker/lock.py derives from this environment.
+* docker/requirements.lock pins every pyproject dependency in its range; an environment
+  installed from it by scripts/install.sh equals it (others skip, saying why).
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import json
 import shutil
@@ -118,6 +120,9 @@ def test_the_image_installs_what_pyproject_ships() -> None:
         assert f"!{source}" in ignore or f"!{source}/" in ignore, source
 
 
+INSTALLED_FROM = "ftcap-installed-from.lock.sha256"  # scripts/install.sh writes it
+
+
 def _lock_module() -> ModuleType:
     """docker/lock.py (not a package: loaded from its path)."""
     spec = importlib.util.spec_from_file_location("ftcap_docker_lock", DOCKER / "lock.py")
@@ -127,16 +132,33 @@ def _lock_module() -> ModuleType:
     return module
 
 
-def test_the_lock_is_this_environment_and_meets_pyproject() -> None:
+def test_the_lock_pins_every_dependency_pyproject_names_within_its_range() -> None:
+    """The lock's freshness, judged on the two files (not on what is installed): every
+    [project] dependency is pinned, at a version its specifier admits."""
     from packaging.requirements import Requirement
 
     lock = _lock_module()
     pins = lock.read_lock()
-    assert pins == lock.resolve(), "regenerate: python docker/lock.py (or install with -c)"
     for text in tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]:
         req = Requirement(text)
         name = lock.canonical(req.name)
-        assert name in pins and req.specifier.contains(pins[name]), text
+        assert name in pins, f"{text}: not in docker/requirements.lock (python docker/lock.py)"
+        assert req.specifier.contains(pins[name]), f"{text}: the lock pins {pins[name]}"
+
+
+def test_an_environment_installed_from_the_lock_is_the_lock() -> None:
+    """Where the environment was installed from the lock (scripts/install.sh records the
+    lock's digest in the venv), what is installed is what the lock pins. A developer's own
+    ``pip install -e .[test]`` or a distribution's packages are no such environment: the
+    check says so and skips, as it means nothing there."""
+    lock = _lock_module()
+    marker = Path(sys.prefix) / INSTALLED_FROM
+    digest = hashlib.sha256((DOCKER / "requirements.lock").read_bytes()).hexdigest()
+    if not marker.is_file():
+        pytest.skip(f"{sys.prefix} was not installed by scripts/install.sh from the lock")
+    if marker.read_text().split()[0] != digest:
+        pytest.skip("the venv was installed from another docker/requirements.lock: reinstall")
+    assert lock.read_lock() == lock.resolve(), "installed versions differ from the lock"
 
 
 # ---------------------------------------------------------------- network: the loopback rule

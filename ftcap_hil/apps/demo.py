@@ -31,7 +31,6 @@ import json
 import logging
 import math
 import socket
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -136,6 +135,7 @@ def gcs_argv(
     )
     if duration is not None:
         argv += ["--duration", repr(duration)]
+    argv += ["--progress"]  # the demo echoes its progress lines (ProgressTail)
     return argv + ([] if plots else ["--no-plots"]) + (["--mcap"] if mcap else [])
 
 
@@ -158,18 +158,39 @@ class StopRequest:
             raise Interrupted(self._signals.signal_name)
 
 
+class ProgressTail:
+    """The ground station's progress lines (``gcs --progress``), echoed from its log file as
+    they appear: what the demo shows while it flies, on a terminal or not."""
+
+    PREFIX = "progress:"
+
+    def __init__(self, path: Path | None) -> None:
+        self.path, self._offset, self._partial = path, 0, ""
+
+    def lines(self) -> list[str]:
+        """The complete progress lines written since the last call."""
+        if self.path is None or not self.path.exists():
+            return []
+        with open(self.path, errors="replace") as fh:
+            fh.seek(self._offset)
+            text = self._partial + fh.read()
+            self._offset = fh.tell()
+        *done, self._partial = text.split("\n")
+        return [ln for ln in done if ln.startswith(self.PREFIX)]
+
+
 def supervise(
     sup: Supervisor,
     gcs: Child,
     loop: DeadlineLoop,
     stop: StopRequest,
     budget_s: float,
-    expected_s: float,
 ) -> None:
     """Until the ground station ends (or a stop signal ends ``loop``); RuntimeError if
-    another child dies first or the ground station overruns ``budget_s``."""
+    another child dies first or the ground station overruns ``budget_s``. Echoes the ground
+    station's progress lines."""
     started = time.monotonic()
-    tty = sys.stdout.isatty()
+    tail = ProgressTail(gcs.log_path)
 
     def tick(now_ns: int) -> None:
         if (dead := sup.died(exclude=gcs)) is not None:
@@ -180,13 +201,12 @@ def supervise(
         elapsed = time.monotonic() - started
         if elapsed > budget_s:
             raise RuntimeError(f"the ground station is still running after {elapsed:.0f} s")
-        if tty:
-            sys.stdout.write(f"\rdemo: {elapsed:5.0f} s of about {expected_s:.0f} s\x1b[K")
-            sys.stdout.flush()
+        for line in tail.lines():
+            print(f"demo: {line}", flush=True)
 
     loop.run(tick, until=lambda: not gcs.running())
-    if tty:
-        sys.stdout.write("\r\x1b[K")
+    for line in tail.lines():
+        print(f"demo: {line}", flush=True)
     stop.check()
 
 
@@ -246,7 +266,7 @@ def _fly(
     try:
         print(f"demo: flying {mission} for {expected_s:.0f} s; logs in {out / 'logs'}", flush=True)
         gcs = start_all(sup, stop, args, mission, out)
-        supervise(sup, gcs, loop, stop, budget_s=expected_s + 120.0, expected_s=expected_s)
+        supervise(sup, gcs, loop, stop, budget_s=expected_s + 120.0)
     except Interrupted as e:
         log.error("interrupted (%s): stopping everything", e)
         return 130

@@ -38,12 +38,15 @@ from ftcap_hil.runtime.ground_station import (
     Flight,
     GroundStation,
     GroundStationError,
+    ProgressLine,
     StatusLine,
     flight_plan,
 )
 from ftcap_hil.runtime.signals import capture_signals
 
 log = logging.getLogger(__name__)
+
+PROGRESS_EVERY_S = 5.0  # --progress: a line this often (mission time)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -61,6 +64,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument(
         "--mcap", action="store_true", help="also DIR/<mode>/run.mcap (ROS 2 messages, Foxglove)"
+    )
+    p.add_argument(
+        "--progress",
+        action="store_true",
+        help=f"a progress line on stdout every {PROGRESS_EVERY_S:g} s of mission time (time, "
+        "phase, injections, the allocator's verdict)",
     )
 
 
@@ -124,7 +133,14 @@ def fly_mission(args: argparse.Namespace, mission: Mission, out: Path) -> int:
                 mission.name, mission.source, mission.duration_s, mode, mission.period_s,
             )  # fmt: skip
             recorder = FlightRecorder(mission.scenario)
-            flight = station.flight(plan, conn.t0_ns, recorder, StatusLine(sys.stderr.isatty()))
+            progress = None
+            if args.progress:
+                sc = mission.scenario
+                progress = ProgressLine(
+                    PROGRESS_EVERY_S, sc.phases(), mission.duration_s, mode=conn.mode
+                )
+            live = StatusLine(sys.stderr.isatty())
+            flight = station.flight(plan, conn.t0_ns, recorder, live, progress)
             try:
                 flight.run()
             except GroundStationError as e:

@@ -40,6 +40,7 @@ from ftcap_hil.runtime.gcs_parts import (
     InjectionOutcome,
     Injector,
     LinkLost,
+    ProgressLine,
     StatusLine,
     state_of,
     status_text,
@@ -69,8 +70,9 @@ class Flight:
         recorder: FlightRecorder | None = None,
         line: StatusLine | None = None,
         check: Callable[[], None] | None = None,
+        progress: ProgressLine | None = None,
     ) -> None:
-        self.link, self.plan = link, plan
+        self.link, self.plan, self.progress = link, plan, progress
         self.loop = DeadlineLoop(int(round(plan.period_s * 1e9)))
         self.t0_ns = self.loop.clock() if t0_ns is None else t0_ns
         self.recorder, self.line, self._check = recorder, line, check
@@ -164,6 +166,10 @@ class Flight:
             if self.line is not None:
                 self.line.show(status_text(t, x, ref, status, u, self.plan.duration_s))
         self.drain()
+        if self.progress is not None and self.progress.due(t):
+            if self.line is not None:
+                self.line.clear()
+            self.progress.show(t, x, ref, status, self.outcomes)
         self.cycles += 1
 
     def _state(self, now_ns: int, t: float) -> FloatArray | None:

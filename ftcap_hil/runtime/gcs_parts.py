@@ -5,7 +5,8 @@
 * :class:`FlightPlan`: the law, the period, the duration, the injections and the limits;
 * :class:`Injector`: MAV_CMD_INJECT_FAILURE sent in order from its own thread (it waits for
   the COMMAND_ACKs, the control loop never does); :class:`InjectionOutcome` per request;
-* :class:`StatusLine`: one live line on a terminal;
+* :class:`StatusLine`: one live line on a terminal; :class:`ProgressLine`: a line on stdout
+  every few seconds of mission time (a log file or a pipe: ``--progress``);
 * the driver's errors, each carrying its exit code of
   :class:`~ftcap_hil.core.errors.ExitCode`.
 """
@@ -224,3 +225,75 @@ def status_text(
         f"t {t:6.1f}{of} s  N {x[0]:+6.2f} E {x[1]:+6.2f} m  psi {math.degrees(x[2]):+7.1f} deg"
         f"  |e| {err:5.2f} m  dhat {dh}  u {thrust} N"
     )
+
+
+class ProgressLine:
+    """A progress line every ``every_s`` of mission time, written whole (``write``: stdout,
+    flushed, by default) so that a log file or a pipe shows it: time flown, the fault phase,
+    the injections carried out so far, the distance to the reference and the allocator's
+    current verdict (mode, flagged thrusters, delta_hat). ``phases``: the mission's fault
+    phases [start, end) s; ``mode``: the allocator's mode as read at connection, for a status
+    that does not carry it (FTCAP_STATUS)."""
+
+    PREFIX = "progress:"
+
+    def __init__(
+        self,
+        every_s: float,
+        phases: Sequence[tuple[float, float]],
+        duration_s: float | None,
+        write: Callable[[str], None] | None = None,
+        mode: str | None = None,
+    ) -> None:
+        if not every_s > 0:
+            raise ValueError(f"progress every_s: must be > 0, got {every_s}")
+        self.every_s, self.phases, self.duration_s = every_s, list(phases), duration_s
+        self._write = write or (lambda text: print(text, flush=True))
+        self._next_s, self.mode = 0.0, mode
+
+    def due(self, t: float) -> bool:
+        """Whether a line is due at mission time ``t`` (then the next one is ``every_s`` on)."""
+        if t < self._next_s:
+            return False
+        self._next_s = (math.floor(t / self.every_s) + 1) * self.every_s
+        return True
+
+    def show(
+        self, t: float, x: FloatArray | None, ref: FloatArray | None, st: Any,
+        outcomes: Sequence[InjectionOutcome],
+    ) -> None:  # fmt: skip
+        """Write the line for mission time ``t`` (:meth:`due` decides when)."""
+        self._write(self.text(t, x, ref, st, outcomes))
+
+    def text(
+        self, t: float, x: FloatArray | None, ref: FloatArray | None, st: Any,
+        outcomes: Sequence[InjectionOutcome],
+    ) -> str:  # fmt: skip
+        """The line (class docstring); ``st``: the latest AllocatorStatus or None."""
+        of = "" if self.duration_s is None else f"/{self.duration_s:.0f}"
+        parts = [f"{self.PREFIX} t {t:.0f}{of} s"]
+        j = next((k for k, (a, b) in enumerate(self.phases) if a <= t < b), None)
+        if j is not None:
+            a, b = self.phases[j]
+            parts.append(f"phase {j + 1}/{len(self.phases)} [{a:g}, {b:g}) s")
+        done = [
+            f"{o.injection.kind.name} thruster {o.injection.thruster + 1} at "
+            f"{o.sent_at_s:.1f} s ({o.result})"
+            for o in outcomes
+        ]
+        parts.append("injected: " + (", ".join(done) if done else "nothing yet"))
+        if x is not None and ref is not None:
+            parts.append(f"|e| {math.hypot(x[0] - ref[0], x[1] - ref[1]):.3f} m")
+        parts.append(_verdict_text(st, self.mode))
+        return "; ".join(parts)
+
+
+def _verdict_text(st: Any, mode: str | None) -> str:
+    """The allocator's verdict in a few words (no status yet: says so); ``mode``: the one
+    to name when the status does not carry it."""
+    if st is None:
+        return "allocator: no status yet"
+    mode = st.mode.value if st.mode is not None else mode or "?"
+    flagged = [str(i + 1) for i, f in enumerate(st.faulty) if f]
+    dh = " ".join(f"{d:.2f}" for d in st.delta_hat)
+    return f"allocator {mode}: flagged {', '.join(flagged) or 'none'}, delta_hat {dh}"

@@ -46,6 +46,7 @@ from ftcap_hil.runtime.gcs_parts import (
     Interrupted,
     LinkLost,
     NoAnswer,
+    ProgressLine,
     Refused,
     StatusLine,
     WrenchLaw,
@@ -63,6 +64,7 @@ __all__ = [
     "Interrupted",
     "LinkLost",
     "NoAnswer",
+    "ProgressLine",
     "Refused",
     "StatusLine",
     "WrenchLaw",
@@ -208,12 +210,14 @@ class GroundStation:
         t0_ns: int | None = None,
         recorder: FlightRecorder | None = None,
         line: StatusLine | None = None,
+        progress: ProgressLine | None = None,
     ) -> Flight:
         """A flight of ``plan`` from ``t0_ns`` (default: now); a stop already requested
         makes it end before its first cycle."""
         self.current = Flight(
-            self.link, plan, t0_ns, recorder=recorder, line=line, check=self.check
-        )
+            self.link, plan, t0_ns, recorder=recorder, line=line, check=self.check,
+            progress=progress,
+        )  # fmt: skip
         if self._stop.is_set():
             self.current.request_exit()
         return self.current

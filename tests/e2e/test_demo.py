@@ -75,6 +75,23 @@ def test_demo_completes_and_writes_the_simulator_outputs(demo: DemoRun) -> None:
 
 
 @pytest.mark.timeout(300)
+def test_the_demo_says_how_the_flight_goes_every_5_s(demo: DemoRun) -> None:
+    """A progress line in every 5 s of mission time, on the ground station's clock. Judged
+    on the mission times the lines carry, not on when they were printed: each window
+    [5k, 5k + 5) s of the 30 s flown holds a line (a line is due at the first cycle at or
+    after each 5 s mark; only a stall of the ground station over ~5 s could empty a window,
+    and that would end the flight on its odometry timeout); the lines after the 12 s onset
+    name the injection and the allocator's mode."""
+    lines = [ln for ln in demo.stdout.splitlines() if ln.startswith("demo: progress: t ")]
+    times = [float(ln.split()[3].split("/")[0]) for ln in lines]
+    assert times == sorted(times), times
+    windows = {int(t // 5.0) for t in times}
+    assert set(range(int(DURATION_S // 5.0))) <= windows, (times, demo.stdout[-2000:])
+    after = [ln for ln, t in zip(lines, times, strict=True) if t >= 15.0]
+    assert after and all("WEAK thruster 1" in ln and "allocator ftcap" in ln for ln in after)
+
+
+@pytest.mark.timeout(300)
 def test_faults_are_injected_and_identified(demo: DemoRun) -> None:
     results = json.loads((demo.out / "results.json").read_text())
     injections = results["modes"]["ftcap"]["injections"]

@@ -35,6 +35,7 @@ from ftcap_hil.runtime.campaign import CampaignPlan, RunTask
 from ftcap_hil.runtime.campaign_faults import random_faults
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+FROZEN = "frozen"  # the kind of a thruster whose output is frozen ([[fault]] kind = "stuck")
 
 
 def deep_merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
@@ -132,15 +133,22 @@ def _length(sc: Scenario, given: float | None) -> float:
 
 
 def schedule_kinds(sc: Scenario) -> dict[int, str]:
-    """The kind of each faulty thruster in a scenario's own schedule (metrics' classify)."""
+    """The kind of each faulty thruster in a scenario's own schedule: ``frozen`` for an
+    output frozen at its onset value (``kind = "stuck"``: the schedule flags it, delta 1 and
+    f 0 stay nominal), the metrics' ``classify`` of delta and f for every other fault, and
+    ``mixed`` for a thruster frozen at some times and otherwise faulty at others."""
     times = [t for t in sc.faults.change_times() if t < sc.duration_s]
     truths = [sc.faults.at(t) for t in times]
     out = {}
     for i in range(sc.thrusters.m):
-        d = np.array([tr.delta[i] for tr in truths if tr.delta[i] != 1 or tr.f[i] != 0])
-        f = np.array([tr.f[i] for tr in truths if tr.delta[i] != 1 or tr.f[i] != 0])
-        if d.size:
-            out[i] = classify(d, f)
+        frozen = any(tr.stuck[i] for tr in truths)
+        other = [tr for tr in truths if not tr.stuck[i] and (tr.delta[i] != 1 or tr.f[i] != 0)]
+        if other:
+            kind = classify(np.array([tr.delta[i] for tr in other]),
+                            np.array([tr.f[i] for tr in other]))  # fmt: skip
+            out[i] = "mixed" if frozen else kind
+        elif frozen:
+            out[i] = FROZEN
     return out
 
 

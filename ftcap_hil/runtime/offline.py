@@ -3,7 +3,10 @@
 The true plant is the paper's discrete model (``integrator = "euler"``, identical to what
 the allocator assumes) or RK4 with substeps (``"rk4"``), which shows what model mismatch
 does to the estimates. One call runs one mode; ``run_modes`` runs several on the same
-scenario (the ``none`` run is the reference for the deviation metrics).
+scenario (the ``none`` run is the reference for the deviation metrics). A thruster whose
+output is frozen (``[[fault]] kind = "stuck"``) holds the force it produced at the onset,
+as the realistic truth's thruster bank does, and is recorded as such (delta 0, f that
+force: ``Truth.effective``).
 """
 
 from __future__ import annotations
@@ -35,16 +38,20 @@ def true_step(sc: Scenario, x: FloatArray, tau: FloatArray, dt: float | None = N
 
 
 def exact_fault_step(
-    sc: Scenario, faults: FaultSchedule, x: FloatArray, u: FloatArray, t: float
-) -> FloatArray:
+    sc: Scenario, faults: FaultSchedule, x: FloatArray, u: FloatArray, t: float,
+    held: FloatArray,
+) -> tuple[FloatArray, FloatArray]:  # fmt: skip
     """One step in which a fault may change mid-interval, as on a real vessel: the step is
-    split at every fault change inside (t, t + dt) (vessel plant only)."""
+    split at every fault change inside (t, t + dt) (vessel plant only). ``held`` (m,) N:
+    the forces produced just before ``t`` (a frozen output keeps its own); returns the
+    state and the forces produced at the end of the step."""
     cuts = [c for c in faults.change_times() if t < c < t + sc.dt_s]
     edges = [t, *cuts, t + sc.dt_s]
     for a, b in zip(edges[:-1], edges[1:], strict=True):
-        truth = faults.at(a)
-        x = true_step(sc, x, sc.B @ (truth.delta * u + truth.f), b - a)
-    return x
+        truth = faults.at(a).effective(held)
+        held = truth.delta * u + truth.f
+        x = true_step(sc, x, sc.B @ held, b - a)
+    return x, held
 
 
 def told_sensor_noise(sc: Scenario) -> Scenario:
@@ -85,13 +92,14 @@ def run_mode(
         from tqdm import tqdm
 
         steps = tqdm(steps, desc=f"{sc.name} [{mode.value}]", unit="step", leave=False)
+    held = np.zeros(sc.thrusters.m)  # the forces produced last: what a frozen output keeps
     for k in steps:
         t = k * sc.dt_s
         x_meas = x + rng.normal(0.0, sc.noise_std) if noisy else x
         w = None if x_meas_prev is None else Observation(x_meas_prev, x_meas, sc.dt_s)
         ref = sc.reference_at(t)
         tau_d = sc.controller(x_meas, ref)
-        truth = faults.at(t)
+        truth = faults.at(t).effective(held)
         t0 = time.perf_counter()
         res = core.step(tau_d, w, truth)
         elapsed = time.perf_counter() - t0
@@ -100,9 +108,9 @@ def run_mode(
         rec.add(t, x, ref, tau_d, tau, res, produced, truth, elapsed)
         x_meas_prev = x_meas
         if exact_faults and not isinstance(sc.plant, LinearPlant):
-            x = exact_fault_step(sc, faults, x, res.u, t)
+            x, held = exact_fault_step(sc, faults, x, res.u, t, held)
         else:
-            x = true_step(sc, x, tau)
+            x, held = true_step(sc, x, tau), produced
     return rec.finish()
 
 

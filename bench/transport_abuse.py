@@ -33,8 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bridges.can_io.adapters import CanCommandSource, CanThrusterSink  # noqa: E402
+from bridges.can_io.assembler import TransferAssembler  # noqa: E402
 from bridges.can_io.bus import open_can_bus  # noqa: E402
-from bridges.can_io.codec import CanFrame, TransferAssembler, encode_raw_command  # noqa: E402
+from bridges.can_io.codec import CanFrame, encode_raw_command  # noqa: E402
 from bridges.can_io.force_map import ForceRawMap  # noqa: E402
 from bridges.can_io.hub import CanHub  # noqa: E402
 from ftcap_hil.runtime.processes import free_port  # noqa: E402

@@ -16,12 +16,12 @@ from typing import Self
 
 import can
 
+from bridges.can_io.assembler import TransferAssembler
 from bridges.can_io.codec import (
     CanFrame,
     DataType,
     Message,
     Received,
-    TransferAssembler,
     TransferIds,
     encode,
     with_transfer_id,

@@ -26,7 +26,8 @@ import numpy as np
 import pytest
 
 from bridges.can_io.adapters import CanEscStatusSink
-from bridges.can_io.codec import CanFrame, DataType, RawCommandMsg, TransferAssembler
+from bridges.can_io.assembler import TransferAssembler
+from bridges.can_io.codec import CanFrame, DataType, RawCommandMsg
 from bridges.mavlink.config import ALLOCATOR_IDS, GCS_IDS, MavlinkEndpoint
 from bridges.mavlink.gcs import MavlinkGcsLink
 from ftcap_hil.apps.allocator import wire

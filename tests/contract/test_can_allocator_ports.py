@@ -14,15 +14,9 @@ import can
 import numpy as np
 import pytest
 
+from bridges.can_io.assembler import TransferAssembler
 from bridges.can_io.bus import open_can_bus
-from bridges.can_io.codec import (
-    CanFrame,
-    DataType,
-    Health,
-    NodeStatusMsg,
-    RawCommandMsg,
-    TransferAssembler,
-)
+from bridges.can_io.codec import CanFrame, DataType, Health, NodeStatusMsg, RawCommandMsg
 from bridges.can_io.hub import CanHub
 from ftcap_hil.apps.allocator_ports import build_ports
 from ftcap_hil.config.daemon import LoadedConfig, load_daemon_config

@@ -20,8 +20,9 @@ import can
 import pytest
 
 from bridges.can_io.adapters import CanCommandSource, CanThrusterSink
+from bridges.can_io.assembler import TransferAssembler
 from bridges.can_io.bus import open_can_bus
-from bridges.can_io.codec import CanFrame, NodeStatusMsg, RawCommandMsg, TransferAssembler
+from bridges.can_io.codec import CanFrame, NodeStatusMsg, RawCommandMsg
 from bridges.can_io.force_map import ForceRawMap
 from bridges.can_io.hub import CanHub
 

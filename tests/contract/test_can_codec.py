@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from dronecan.transport import Frame, Transfer, TransferManager
 
+from bridges.can_io.assembler import TransferAssembler
 from bridges.can_io.codec import (
     PRIORITY_HIGH,
     CanFrame,
@@ -23,7 +24,6 @@ from bridges.can_io.codec import (
     Mode,
     NodeStatusMsg,
     RawCommandMsg,
-    TransferAssembler,
     TransferIds,
     decode_frames,
     encode,

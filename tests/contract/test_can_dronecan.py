@@ -27,6 +27,7 @@ from bridges.can_io.adapters import (
     CanEscStatusSource,
     CanThrusterSink,
 )
+from bridges.can_io.assembler import TransferAssembler
 from bridges.can_io.bus import open_can_bus
 from bridges.can_io.codec import (
     CanFrame,
@@ -36,7 +37,6 @@ from bridges.can_io.codec import (
     Mode,
     NodeStatusMsg,
     RawCommandMsg,
-    TransferAssembler,
     encode,
     encode_raw_command,
 )

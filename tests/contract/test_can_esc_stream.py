@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 
 from bridges.can_io.adapters import CanThrusterSink
+from bridges.can_io.assembler import TransferAssembler
 from bridges.can_io.bus import open_can_bus
-from bridges.can_io.codec import CanFrame, RawCommandMsg, TransferAssembler
+from bridges.can_io.codec import CanFrame, RawCommandMsg
 from bridges.can_io.esc_stream import EscCommandStream
 from bridges.can_io.force_map import ForceRawMap
 from bridges.can_io.hub import CanHub

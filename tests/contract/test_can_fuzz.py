@@ -32,14 +32,9 @@ from bridges.can_io.adapters import (
     CanEscStatusSource,
     CanThrusterSink,
 )
+from bridges.can_io.assembler import DEFAULT_MAX_PENDING, TransferAssembler
 from bridges.can_io.bus import open_can_bus
-from bridges.can_io.codec import (
-    DEFAULT_MAX_PENDING,
-    CanFrame,
-    RawCommandMsg,
-    TransferAssembler,
-    encode_raw_command,
-)
+from bridges.can_io.codec import CanFrame, RawCommandMsg, encode_raw_command
 from bridges.can_io.force_map import RAW_MAX, ForceRawMap, NonFiniteCommand
 from bridges.can_io.hub import CanHub
 from ftcap_hil.core.messages import EscStatus, ThrusterCommand

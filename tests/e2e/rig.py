@@ -29,7 +29,8 @@ import can
 import numpy as np
 
 from bridges.can_io.adapters import CanEscStatusSource
-from bridges.can_io.codec import CanFrame, DataType, RawCommandMsg, TransferAssembler
+from bridges.can_io.assembler import TransferAssembler
+from bridges.can_io.codec import CanFrame, DataType, RawCommandMsg
 from bridges.can_io.hub_bus import CanHubBus
 from bridges.mavlink.config import ALLOCATOR_IDS, GCS_IDS, VESSEL_IDS, MavlinkEndpoint
 from bridges.mavlink.gcs import MavlinkGcsLink

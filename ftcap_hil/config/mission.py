@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ftcap_hil.config.realistic import is_realistic, parse_realistic
+from ftcap_hil.config.realistic import anchor_preset, is_realistic, parse_realistic
 from ftcap_hil.config.scenario import SHIPPED
 from ftcap_hil.config.scenario_tables import REPLACEABLE, scenario_from
 from ftcap_hil.config.tables import Table
@@ -124,7 +124,8 @@ def mission_from(root: Table, base: Path | None = None) -> Mission:
     sc_doc = _scenario_doc(head, base)
     if is_realistic(sc_doc.data):  # its own reader: the mission's tables merged in
         merged = {**sc_doc.data, **{k: root.data[k] for k in REPLACEABLE if root.has(k)}}
-        sc = parse_realistic(merged, f"{root.file} (scenario {sc_doc.source})")
+        where = f"{root.file} (scenario {sc_doc.source})"
+        sc = parse_realistic(anchor_preset(merged, sc_doc.base), where)
     else:
         with Table.document(sc_doc) as sc_root:
             sc = scenario_from(sc_root, root)

@@ -6,7 +6,7 @@ A realistic scenario is a scenario file whose ``[plant]`` names a preset
 
     [plant]
     kind = "preset"
-    preset = "cybership2"          # shipped name or a path
+    preset = "cybership2"          # shipped name or a path (relative: to the scenario file)
     inversion = "trapezoid"        # how the allocator inverts a step (its truth is continuous)
     substeps = 4                   # RK4 substeps of the truth per step
 
@@ -46,12 +46,19 @@ import copy
 import dataclasses
 import math
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ftcap_hil.config.drives import DriveErrors, data_sheet
-from ftcap_hil.config.presets import AllocatorModel, VesselPreset, apply_mismatch, load_preset
+from ftcap_hil.config.presets import (
+    AllocatorModel,
+    VesselPreset,
+    apply_mismatch,
+    load_preset,
+    preset_names,
+)
 from ftcap_hil.config.scenario_tables import scenario_from
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.vessel import PlantKind
@@ -74,6 +81,26 @@ def is_realistic(data: dict[str, Any]) -> bool:
     """Whether a scenario document names a vessel preset."""
     plant = data.get("plant")
     return isinstance(plant, dict) and plant.get("kind") == PlantKind.PRESET.value
+
+
+def anchor_preset(data: Mapping[str, Any], base: Path | None) -> dict[str, Any]:
+    """``data`` with a relative ``[plant] preset`` path made absolute against ``base``, the
+    folder of the file that names it, so that the document reads the same from any working
+    directory (and written elsewhere, as a campaign's replay file). A file of that name in
+    ``base`` comes first, then a shipped preset of that name; an absolute path, a shipped
+    name, a document without a ``preset`` or ``base`` None leave ``data`` as it is."""
+    out = dict(data)
+    plant = data.get("plant")
+    value = plant.get("preset") if isinstance(plant, dict) else None
+    if base is None or not isinstance(plant, dict) or not isinstance(value, str):
+        return out
+    path = base / value
+    if Path(value).is_absolute() or (
+        not path.is_file() and value.removesuffix(".toml") in preset_names()
+    ):
+        return out
+    out["plant"] = {**plant, "preset": str(path.resolve())}
+    return out
 
 
 def parse_realistic(data: dict[str, Any], where: str) -> Scenario:

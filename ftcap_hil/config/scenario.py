@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ftcap_hil.config.realistic import is_realistic, parse_realistic
+from ftcap_hil.config.realistic import anchor_preset, is_realistic, parse_realistic
 from ftcap_hil.config.scenario_tables import scenario_from
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml, shipped_names
@@ -22,11 +22,15 @@ from ftcap_hil.core.scenario import Scenario
 SHIPPED = "ftcap_hil.data.scenarios"
 
 
-def parse_scenario(data: Mapping[str, Any], file: str = "scenario") -> Scenario:
+def parse_scenario(
+    data: Mapping[str, Any], file: str = "scenario", base: Path | None = None
+) -> Scenario:
     """A scenario from a parsed TOML document (``file`` names it in messages); one whose
-    ``[plant] kind = "preset"`` is a realistic scenario (``config/realistic.py``)."""
+    ``[plant] kind = "preset"`` is a realistic scenario (``config/realistic.py``), its
+    relative ``[plant] preset`` path read from ``base``, the file's folder (None: the
+    working directory)."""
     if is_realistic(dict(data)):
-        return parse_realistic(dict(data), file)
+        return parse_realistic(anchor_preset(data, base), file)
     with Table(data, file) as root:
         return scenario_from(root)
 
@@ -39,4 +43,4 @@ def shipped_scenarios() -> list[str]:
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """A path to a TOML file, or the name of a shipped scenario (``paper-4.2-ex1``)."""
     doc = read_toml(name_or_path, SHIPPED, what="scenario")
-    return parse_scenario(doc.data, doc.source)
+    return parse_scenario(doc.data, doc.source, doc.base)

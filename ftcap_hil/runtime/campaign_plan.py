@@ -6,7 +6,10 @@ healthy cases, where both are the ``none`` run exactly) and every other mode or 
 Each run is a full scenario document: the file, the entry's ``[scenario.set]`` tables
 deep-merged in, the duration, ``[scenario] seed`` = the campaign seed (the noise draws),
 the faults (as in the file, generated, or none), and the variant's tables. The same document
-is written to ``DIR/replay/`` so ``ftcap-hil simulate`` reproduces the run.
+is written to ``DIR/replay/`` so ``ftcap-hil simulate`` reproduces the run; a relative
+``[plant] preset`` path in it is made absolute against the file that names it (the
+scenario file, or the campaign file for a ``[scenario.set]`` one), so a replay reads the
+same preset from any working directory.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.config.campaign import CampaignSpec, FaultSource, ScenarioEntry, Variant
+from ftcap_hil.config.realistic import anchor_preset
 from ftcap_hil.config.scenario import SHIPPED, parse_scenario
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.errors import ConfigError
@@ -112,8 +116,10 @@ def _read(entry: ScenarioEntry, spec: CampaignSpec) -> dict[str, Any]:
     if spec.base is not None and not Path(source).is_absolute():
         if (spec.base / source).is_file():
             source = spec.base / source
-    data = read_toml(source, SHIPPED, what="scenario").data
-    doc = deep_merge(data, entry.overrides)
+    file = read_toml(source, SHIPPED, what="scenario")
+    # a relative preset path: to the scenario file, or to the campaign file for [scenario.set]
+    data = anchor_preset(file.data, file.base)
+    doc = deep_merge(data, anchor_preset(entry.overrides, spec.base))
     doc.setdefault("scenario", {})
     duration = entry.duration_s or spec.duration_s
     if duration is not None:

@@ -1,0 +1,90 @@
+"""Realistic scenarios: a relative ``[plant] preset`` path is read from the folder of the file
+that names it (scenario or campaign file), wherever the command runs."""
+
+from __future__ import annotations
+
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+import pytest
+
+from ftcap_hil.config.campaign import load_campaign
+from ftcap_hil.config.mission import load_mission
+from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.runtime.campaign_plan import dumps_toml, plan_campaign
+
+SHIPPED_L_M = 1.255  # CyberShip II's length overall, [hull] l_oa_m of its preset
+
+
+def _preset_text(length_m: float) -> str:
+    """The shipped CyberShip II preset with another length overall (to tell the files apart)."""
+    text = resources.files("ftcap_hil.data.vessels").joinpath("cybership2.toml").read_text()
+    assert f"l_oa_m = {SHIPPED_L_M}" in text
+    return text.replace(f"l_oa_m = {SHIPPED_L_M}", f"l_oa_m = {length_m}")
+
+
+def _scenario_doc(preset: str) -> dict:
+    """The shipped CyberShip II station keeping with ``[plant] preset = preset``, 2 s long."""
+    text = resources.files("ftcap_hil.data.scenarios").joinpath("cybership2-station.toml")
+    doc = tomllib.loads(text.read_text())
+    doc["plant"]["preset"] = preset
+    doc["scenario"]["duration"] = 2.0
+    return doc
+
+
+@pytest.fixture
+def user_files(tmp_path: Path) -> Path:
+    """``a/``: a scenario naming ``presets/mine.toml`` (l_oa_m 2.5) and one naming the
+    shipped ``cybership2``; ``b/``: a campaign running the first from ``../a`` and, with
+    ``[scenario.set.plant] preset``, its own ``theirs.toml`` (l_oa_m 3.0)."""
+    (tmp_path / "a" / "presets").mkdir(parents=True)
+    (tmp_path / "b").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "a" / "presets" / "mine.toml").write_text(_preset_text(2.5))
+    (tmp_path / "a" / "user.toml").write_text(dumps_toml(_scenario_doc("presets/mine.toml")))
+    (tmp_path / "a" / "shipped.toml").write_text(dumps_toml(_scenario_doc("cybership2")))
+    (tmp_path / "b" / "theirs.toml").write_text(_preset_text(3.0))
+    (tmp_path / "b" / "campaign.toml").write_text(
+        '[campaign]\nname = "paths"\nseeds = [1]\nmodes = ["ftcap"]\n\n'
+        '[[scenario]]\nsource = "../a/user.toml"\nlabel = "mine"\n\n'
+        '[[scenario]]\nsource = "../a/user.toml"\nlabel = "theirs"\n'
+        '[scenario.set.plant]\npreset = "theirs.toml"\n'
+    )
+    return tmp_path
+
+
+def test_a_relative_preset_path_is_read_from_the_scenario_files_folder(
+    user_files: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(user_files / "elsewhere")
+    assert load_scenario(user_files / "a" / "user.toml").length_m == 2.5
+    monkeypatch.chdir(user_files / "a")  # the only directory it was read from before
+    assert load_scenario("user.toml").length_m == 2.5
+    # a shipped preset's name is no path
+    assert load_scenario(user_files / "a" / "shipped.toml").length_m == SHIPPED_L_M
+
+
+def test_a_campaigns_runs_and_replays_read_the_presets_from_any_directory(
+    user_files: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(user_files / "elsewhere")
+    out = user_files / "out"
+    plan, files = plan_campaign(load_campaign(user_files / "b" / "campaign.toml"), out)
+    lengths = {t.label: t.scenario.length_m for t in plan.tasks}
+    assert lengths == {"mine": 2.5, "theirs": 3.0}  # the campaign's own preset: its folder
+    (out / "replay").mkdir(parents=True)
+    for name, text in files.items():
+        (out / "replay" / name).write_text(text)
+    monkeypatch.chdir(user_files)  # a replay is run from anywhere
+    for task in plan.tasks:
+        replay = Path(task.replay.split()[2])
+        assert load_scenario(replay).length_m == lengths[task.label]
+
+
+def test_a_missions_realistic_scenario_reads_its_preset_from_the_scenarios_folder(
+    user_files: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    (user_files / "b" / "mission.toml").write_text('[mission]\nscenario = "../a/user.toml"\n')
+    monkeypatch.chdir(user_files / "elsewhere")
+    assert load_mission(user_files / "b" / "mission.toml").scenario.length_m == 2.5

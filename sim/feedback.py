@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
+from sim.sampling import RateSchedule
 from sim.thrusters import BankOutput
 
 
@@ -92,20 +93,8 @@ class FeedbackSensor:
         self._rng_drift = np.random.default_rng(drift)
         self._offset = np.zeros(m)
         self._offset_t_s: float | None = None
-        self._next_s: float | None = None
+        self._schedule = RateSchedule(config.rate_hz)
         self._pending: deque[FeedbackSample] = deque()
-
-    def _due(self, t_s: float) -> bool:
-        rate = self.config.rate_hz
-        if rate is None:
-            return True
-        if self._next_s is None:
-            self._next_s = t_s
-        if t_s < self._next_s - 1e-9 / rate:
-            return False
-        period = 1.0 / rate
-        self._next_s += period * max(1, math.floor((t_s - self._next_s) / period + 1e-9) + 1)
-        return True
 
     def _measure(self, t_s: float, out: BankOutput) -> list[FeedbackSample]:
         cfg = self.config
@@ -136,7 +125,7 @@ class FeedbackSensor:
     def step(self, t_s: float, out: BankOutput) -> list[FeedbackSample]:
         """The bank's output ``out`` at true time ``t_s`` (s, non-decreasing); returns the
         samples delivered by ``t_s``, oldest first."""
-        if self._due(t_s):
+        if self._schedule.due(t_s):
             self._pending.extend(self._measure(t_s, out))
         ready: list[FeedbackSample] = []
         while self._pending and self._pending[0].t_delivered_s <= t_s + 1e-12:

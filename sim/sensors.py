@@ -34,6 +34,7 @@ import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.plants import wrap_angle
+from sim.sampling import RateSchedule
 
 
 def _axes(name: str, value: object) -> FloatArray:
@@ -108,8 +109,7 @@ class OdometrySensor:
         self._rng_outage = np.random.default_rng(outage)
         self._bias = np.zeros(6)
         self._bias_t_s = 0.0
-        self._t0_s: float | None = None  # time of the first sample
-        self._k = 0  # index of the next sample due
+        self._schedule = RateSchedule(config.rate_hz)
         self._outage = (math.inf, math.inf)  # [start, end) of the next or current outage
         self._pending: deque[Measurement] = deque()
         self.sent = 0  # samples measured
@@ -132,20 +132,6 @@ class OdometrySensor:
             self._outage = self._draw_outage(self._outage[1])
         return self._outage[0] <= t_s
 
-    def _due(self, t_s: float) -> bool:
-        """Whether a sample is due at ``t_s``; sample k is due at ``t0 + k / rate_hz``."""
-        rate = self.config.rate_hz
-        if rate is None:
-            return True
-        if self._t0_s is None:
-            self._t0_s = t_s
-        period = 1.0 / rate
-        if t_s < self._t0_s + self._k * period - 1e-9 * period:
-            return False
-        # the next sample is the first one due after t_s (late steps skip samples)
-        self._k = math.floor((t_s - self._t0_s) / period + 1e-9) + 1
-        return True
-
     def _measure(self, t_s: float, x: FloatArray) -> Measurement:
         cfg = self.config
         v = self._rng_bias.standard_normal(6)
@@ -164,7 +150,7 @@ class OdometrySensor:
         x = np.asarray(x, dtype=np.float64)
         if x.shape != (6,) or not np.all(np.isfinite(x)):
             raise ValueError(f"sensor: expected a finite state of 6, got {x.tolist()}")
-        if self._due(t_s):
+        if self._schedule.due(t_s):
             sample = self._measure(t_s, x)
             self.sent += 1
             dropped = self._rng_drop.random() < self.config.dropout_p

@@ -8,7 +8,7 @@ sensor noise levels (``[sensors]``) and the allocator's model error (``[mismatch
 Read with :class:`~ftcap_hil.config.tables.Table`: an unknown key is an error naming the
 file, the table, the key and the nearest valid key. Angles are degrees in the file
 (``_deg``) and radians here. ``apply_mismatch`` turns a preset into the model the allocator
-is given.
+is given; ``environment_levels`` reads a scenario's ``[environment]`` over a preset's levels.
 """
 
 from __future__ import annotations
@@ -157,17 +157,20 @@ def _fields_in_degrees(t: Table, cls: type, exclude: tuple[str, ...] = ()) -> di
     return out
 
 
+# the sub-tables of [environment] and what each is read into
+ENVIRONMENT_PARTS: tuple[tuple[str, type], ...] = (
+    ("current", CurrentConfig),
+    ("wind", WindConfig),
+    ("waves", WaveConfig),
+)
+
+
 def _environment(root: Table, seed: int) -> EnvironmentConfig:
     env = root.table("environment")
     coef = WindCoefficients(**_numbers(root.table("wind_coefficients"), _keys(WindCoefficients)))
     parts: dict[str, Any] = {}
-    classes: tuple[tuple[str, type], ...] = (
-        ("current", CurrentConfig),
-        ("wind", WindConfig),
-        ("waves", WaveConfig),
-    )
     try:
-        for key, cls in classes:
+        for key, cls in ENVIRONMENT_PARTS:
             parts[key] = cls(**_fields_in_degrees(env.table(key), cls, exclude=("coefficients",)))
         return EnvironmentConfig(
             current=parts["current"],
@@ -177,6 +180,23 @@ def _environment(root: Table, seed: int) -> EnvironmentConfig:
         )
     except ValueError as e:
         raise env.error(None, str(e)) from e
+
+
+def environment_levels(env_t: Table, env: EnvironmentConfig) -> EnvironmentConfig:
+    """``env`` with the levels that ``env_t`` (an ``[environment]`` table with
+    ``[environment.current|wind|waves]``) states: the keys of a preset's own environment
+    (angles as ``*_deg`` degrees), each replacing that one value; a key left out keeps
+    ``env``'s. ``env_t`` is finished here: an unknown table or key, or a value out of range,
+    is a ConfigError naming the file, the table and the key."""
+    given = {
+        key: _fields_in_degrees(env_t.table(key), cls, exclude=("coefficients",))
+        for key, cls in ENVIRONMENT_PARTS
+    }
+    env_t.finish()
+    try:
+        return replace(env, **{k: replace(getattr(env, k), **v) for k, v in given.items()})
+    except ValueError as e:
+        raise env_t.error(None, str(e)) from e
 
 
 def _keys(cls: type) -> tuple[str, ...]:

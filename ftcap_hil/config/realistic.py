@@ -11,17 +11,27 @@ A realistic scenario is a scenario file whose ``[plant]`` names a preset
     substeps = 4                   # RK4 substeps of the truth per step
 
     [conditions]                   # which of the preset's realism acts (all true by default)
-    environment = true             # current, wind, waves at the preset's levels
+    environment = true             # current, wind, waves at the preset's levels ([environment])
     sensors = true                 # position, heading, velocity noise at the preset's levels
     thruster_lag = true            # the preset's first-order time constants
     quantization = true            # the 14-bit command path
     reverse_gain = 1.0             # reverse thrust per commanded N (1: as the allocator assumes)
     deadband_rel = 0.0             # dead band, fraction of each thruster's range
+    drive_telemetry = true         # the drives' telemetry reaches the allocator (if any)
+
+    [environment.current]          # the environment's levels: any key of the preset's own
+    speed_m_s = 0.15               # [environment.current|wind|waves] replaces its value
+    direction_deg = 90.0           # (the rest stay the preset's); unknown keys are errors
+    [environment.waves]
+    hs_m = 0.05
 
     [mismatch]                     # the allocator's model against the truth (the preset's own
     mass = 0.2                     # [mismatch] when absent): fractions, degrees, metres
     damping = -0.3
     angle_deg = { port_rudder = 5.0 }
+    thrust_coefficient = 0.05      # the drives' data sheets: K_T, K_Q, time constants off by
+    torque_coefficient = 0.08      # these fractions (one, or one per thruster)
+    drive_time_constant = 0.25
 
     [sensor]                       # beyond the preset's noise levels
     bias_rel = 0.0                 # slowly drifting bias, std as a fraction of the noise std
@@ -34,7 +44,8 @@ A realistic scenario is a scenario file whose ``[plant]`` names a preset
     damping = 0.9
 
 The other tables ([scenario], [[reference]], [[fault]], [estimator], [allocator],
-[excitation]) are those of every scenario file (:mod:`ftcap_hil.config.scenario_tables`);
+[excitation], [diagnosis]: its keys over the preset's own) are those of every scenario file
+(:mod:`ftcap_hil.config.scenario_tables`);
 ``[scenario] estimation_period_s`` (s, a multiple of ``dt``) spaces the estimation samples
 over several wave periods. The estimator
 is told the preset's sensor levels (``measurement_std``) unless the file states them.
@@ -56,6 +67,7 @@ from ftcap_hil.config.presets import (
     AllocatorModel,
     VesselPreset,
     apply_mismatch,
+    environment_levels,
     load_preset,
     preset_names,
 )
@@ -74,7 +86,7 @@ from sim.sensors import SensorConfig
 from sim.thrusters import DEFAULT_PROPELLER, ThrusterBankConfig
 from sim.truth import TruthConfig
 
-OWN_TABLES = ("plant", "conditions", "mismatch", "sensor", "controller")
+OWN_TABLES = ("plant", "conditions", "environment", "mismatch", "sensor", "controller")
 
 
 def is_realistic(data: dict[str, Any]) -> bool:
@@ -274,7 +286,8 @@ def _truth(
     if drives is not None and telemetry_on:
         feedback = dataclasses.replace(drives.feedback, seed=int(seeds[2].generate_state(2)[1]))
     sensor = _sensor(preset, root.table("sensor"), int(seeds[1].generate_state(1)[0]), dt_s)
-    env = dataclasses.replace(preset.environment, seed=int(seeds[0].generate_state(1)[0]))
+    levels = environment_levels(root.table("environment"), preset.environment)
+    env = dataclasses.replace(levels, seed=int(seeds[0].generate_state(1)[0]))
     truth = TruthConfig(
         vessel=preset.vessel,
         B=preset.B,

@@ -1,17 +1,23 @@
 """Realistic scenarios: a relative ``[plant] preset`` path is read from the folder of the file
-that names it (scenario or campaign file), wherever the command runs."""
+that names it (scenario or campaign file), wherever the command runs; ``[environment]`` sets
+the environment's levels over the preset's, strictly, from a scenario or a campaign entry."""
 
 from __future__ import annotations
 
+import dataclasses
+import math
+import re
 import tomllib
 from importlib import resources
 from pathlib import Path
 
 import pytest
 
-from ftcap_hil.config.campaign import load_campaign
+from ftcap_hil.config.campaign import load_campaign, parse_campaign
 from ftcap_hil.config.mission import load_mission
-from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.config.presets import load_preset
+from ftcap_hil.config.scenario import load_scenario, parse_scenario
+from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.runtime.campaign_plan import dumps_toml, plan_campaign
 
 SHIPPED_L_M = 1.255  # CyberShip II's length overall, [hull] l_oa_m of its preset
@@ -88,3 +94,79 @@ def test_a_missions_realistic_scenario_reads_its_preset_from_the_scenarios_folde
     (user_files / "b" / "mission.toml").write_text('[mission]\nscenario = "../a/user.toml"\n')
     monkeypatch.chdir(user_files / "elsewhere")
     assert load_mission(user_files / "b" / "mission.toml").scenario.length_m == 2.5
+
+
+LEVELS = {
+    "current": {"speed_m_s": 0.15, "direction_deg": 90.0},
+    "waves": {"hs_m": 0.05},
+}
+
+
+def test_environment_levels_from_the_scenario_replace_the_presets_one_by_one() -> None:
+    doc = _scenario_doc("cybership2")
+    doc["environment"] = LEVELS
+    env = parse_scenario(doc, "strong.toml").truth.environment
+    own = load_preset("cybership2").environment
+    assert env is not None and own.current.speed_m_s != 0.15
+    assert env.current.speed_m_s == 0.15 and env.current.direction_rad == math.pi / 2
+    assert env.current == dataclasses.replace(
+        own.current, speed_m_s=0.15, direction_rad=math.pi / 2
+    )
+    assert env.waves == dataclasses.replace(own.waves, hs_m=0.05)  # tp_s, gamma: the preset's
+    assert env.wind == own.wind
+    # without [environment]: the preset's levels
+    plain = parse_scenario(_scenario_doc("cybership2"), "plain.toml").truth.environment
+    assert plain is not None and plain.current == own.current and plain.waves == own.waves
+
+
+@pytest.mark.parametrize(
+    ("levels", "message"),
+    [
+        (
+            {"current": {"sped_m_s": 0.1}},
+            "strong.toml: [environment.current] unknown key 'sped_m_s' (did you mean 'speed_m_s'?)",
+        ),
+        ({"tide": {"speed_m_s": 0.1}}, "strong.toml: [environment] unknown key 'tide'"),
+        ({"waves": {"hs_m": "high"}}, "strong.toml: [environment.waves] hs_m: expected"),
+        ({"wind": {"speed_m_s": -1.0}}, "strong.toml: [environment] wind.speed_m_s: must be"),
+    ],
+)
+def test_environment_levels_are_read_strictly(levels: dict, message: str) -> None:
+    doc = _scenario_doc("cybership2")
+    doc["environment"] = levels
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        parse_scenario(doc, "strong.toml")
+
+
+CAMPAIGN = """
+[campaign]
+name = "current"
+seeds = [1]
+modes = ["ftcap"]
+duration = 2.0
+
+[[scenario]]
+source = "cybership2-station"
+label = "shipped-current"
+
+[[scenario]]
+source = "cybership2-station"
+label = "strong-current"
+[scenario.set.environment.current]
+speed_m_s = 0.15
+direction_deg = 90.0
+"""
+
+
+def test_a_campaign_entry_sets_the_environment_levels(tmp_path: Path) -> None:
+    plan, files = plan_campaign(parse_campaign(tomllib.loads(CAMPAIGN), "c.toml"), tmp_path)
+    speeds = {t.label: t.scenario.truth.environment.current.speed_m_s for t in plan.tasks}
+    shipped = load_preset("cybership2").environment.current.speed_m_s
+    assert speeds == {"shipped-current": shipped, "strong-current": 0.15}
+    strong = [text for name, text in files.items() if name.startswith("strong-current")]
+    assert strong and all("[environment.current]" in text for text in strong)  # replayed too
+    with pytest.raises(ConfigError, match=re.escape(
+        "c.toml: scenario strong-current: [environment.current] unknown key 'direction'"
+    )):  # fmt: skip
+        bad = CAMPAIGN.replace("direction_deg", "direction")
+        plan_campaign(parse_campaign(tomllib.loads(bad), "c.toml"), tmp_path)

@@ -48,7 +48,9 @@ The other tables ([scenario], [[reference]], [[fault]], [estimator], [allocator]
 (:mod:`ftcap_hil.config.scenario_tables`);
 ``[scenario] estimation_period_s`` (s, a multiple of ``dt``) spaces the estimation samples
 over several wave periods. The estimator
-is told the preset's sensor levels (``measurement_std``) unless the file states them.
+is told the preset's sensor levels (``measurement_std``) unless the file states them. A
+plain scenario's ``[vessel]`` and ``[noise]`` are refused: the preset's thrusters and
+sensor levels stand in for them.
 """
 
 from __future__ import annotations
@@ -87,6 +89,11 @@ from sim.thrusters import DEFAULT_PROPELLER, ThrusterBankConfig
 from sim.truth import TruthConfig
 
 OWN_TABLES = ("plant", "conditions", "environment", "mismatch", "sensor", "controller")
+# tables of a plain scenario that would be silently replaced here, and what replaces them
+PLAIN_ONLY = {
+    "vessel": "the thrusters are the preset's ([plant] preset, [mismatch])",
+    "noise": "the sensor noise is the preset's ([conditions] sensors, [sensor])",
+}
 
 
 def is_realistic(data: dict[str, Any]) -> bool:
@@ -120,10 +127,13 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     root = Table(data, where)
     for name in OWN_TABLES:
         root.allow(name)
+    for name, why in PLAIN_ONLY.items():
+        if name in data:
+            raise root.error(None, f"unknown table {name!r} in a realistic scenario: {why}")
     seed = _seed(data, where)
     plant_t = root.table("plant", required=True)
     plant_t.allow("kind")
-    preset = load_preset(plant_t.string("preset"), seed=seed)
+    preset = _preset(plant_t, seed)
     inversion = plant_t.enum("inversion", Inversion, Inversion.TRAPEZOID)
     substeps = plant_t.integer("substeps", 4, lo=1)
     plant_t.finish()
@@ -153,6 +163,16 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
         length_m=preset.hull.l_oa_m,
         drives=_drives_told(preset, truth, errors),
     )
+
+
+def _preset(plant_t: Table, seed: int) -> VesselPreset:
+    """``[plant] preset``, loaded; its errors (no such file, a bad preset file) also name
+    the scenario file and the key."""
+    name = plant_t.string("preset")
+    try:
+        return load_preset(name, seed=seed)
+    except ConfigError as e:
+        raise plant_t.error("preset", str(e)) from e
 
 
 def _drive_errors(mm: Table) -> DriveErrors:

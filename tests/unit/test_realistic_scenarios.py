@@ -4,6 +4,7 @@ the environment's levels over the preset's, strictly, from a scenario or a campa
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import re
@@ -170,3 +171,76 @@ def test_a_campaign_entry_sets_the_environment_levels(tmp_path: Path) -> None:
     )):  # fmt: skip
         bad = CAMPAIGN.replace("direction_deg", "direction")
         plan_campaign(parse_campaign(tomllib.loads(bad), "c.toml"), tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        (
+            "vessel",
+            "unknown table 'vessel' in a realistic scenario: the thrusters are the preset's",
+        ),
+        (
+            "noise",
+            "unknown table 'noise' in a realistic scenario: the sensor noise is the preset's",
+        ),
+    ],
+)
+def test_a_plain_scenarios_vessel_or_noise_table_is_refused_not_replaced(
+    table: str, message: str
+) -> None:
+    doc = _scenario_doc("cybership2")
+    doc[table] = {"preset": "paper-4.2"} if table == "vessel" else {"state_std": [0.1] * 6}
+    with pytest.raises(ConfigError, match=re.escape(f"r.toml: {message}")):
+        parse_scenario(doc, "r.toml")
+
+
+def test_a_missing_preset_names_the_scenario_file_the_key_and_the_path(tmp_path: Path) -> None:
+    (tmp_path / "r.toml").write_text(dumps_toml(_scenario_doc("presets/missing.toml")))
+    want = f"{tmp_path / 'r.toml'}: [plant] preset: vessel preset '{tmp_path / 'presets'}"
+    with pytest.raises(ConfigError, match=re.escape(want)):
+        load_scenario(tmp_path / "r.toml")
+
+
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "scenarios.md"
+
+
+def _docs_section() -> tuple[str, list[str]]:
+    """docs/scenarios.md's "Realistic scenarios" section and its TOML blocks."""
+    text = DOCS.read_text()
+    section = text[text.index("## Realistic scenarios") : text.index("## Strict keys")]
+    return section, re.findall(r"```toml\n(.*?)```", section, re.S)
+
+
+def _valid_keys(doc: dict, table: str) -> list[str]:
+    """The keys the reader knows in ``table`` (dotted), from its unknown-key message."""
+    target = doc = copy.deepcopy(doc)
+    for part in table.split("."):
+        target = target.setdefault(part, {})
+    target["zz_unknown"] = 1
+    with pytest.raises(ConfigError, match=re.escape(f"[{table}] unknown key 'zz_unknown'")) as e:
+        parse_scenario(doc, "docs.toml")
+    return str(e.value).split("valid keys: ")[1].split(", ")
+
+
+# [diagnosis] is DiagnosisConfig's, as the section says, not listed key by key
+TABLES = ("plant", "conditions", "mismatch", "sensor", "controller")
+TABLES += ("environment.current", "environment.wind", "environment.waves")
+
+
+def test_the_docs_section_shows_what_the_reader_reads() -> None:
+    section, blocks = _docs_section()
+    example = tomllib.loads(blocks[0])
+    # every table and key of the example is one the reader takes ...
+    sc = parse_scenario({**_scenario_doc("cybership2"), **example}, "docs.toml")
+    assert sc.truth.environment.current.speed_m_s == example["environment"]["current"]["speed_m_s"]
+    # ... and every key the reader takes is in the section
+    for table in TABLES:
+        for key in _valid_keys({**_scenario_doc("cybership2"), **example}, table):
+            shown = (f"`{key}`", f"\n{key} = ", f"# {key} = ")
+            assert any(form in section for form in shown), (table, key)
+    # the campaign example plans, with its level
+    campaign = '[campaign]\nname = "docs"\nseeds = [1]\nmodes = ["ftcap"]\nduration = 2.0\n'
+    campaign += blocks[1] + '\n[faults]\nkinds = ["dead"]\nonset = [1.0, 1.5]\n'
+    plan, _ = plan_campaign(parse_campaign(tomllib.loads(campaign), "docs.toml"), Path("unused"))
+    assert {t.scenario.truth.environment.current.speed_m_s for t in plan.tasks} == {0.15}

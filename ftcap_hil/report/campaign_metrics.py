@@ -7,7 +7,8 @@ allocation, the effectiveness the allocator used below its dead threshold).
 
 * A *fault episode* is a maximal run of cycles in which a thruster's truth is not nominal
   (delta_i != 1 or f_i != 0); it is *detectable* when its delta drops below the core's
-  fault threshold; the detection reference t_d is the first such cycle.
+  fault threshold; the detection reference t_d is the first such cycle. A frozen output
+  (``[[fault]] kind = "stuck"``) is recorded as delta 0 and f = the held force: a fault.
 * Thruster i is *healthy* at k when its truth is nominal: a flag or a removal that outlives
   its fault (an intermittent fault's off-spell, a fault that ended) is false, as it is for
   the boat; how long it lasts is also the recovery's (below).
@@ -43,7 +44,7 @@ from ftcap_hil.config.campaign import MetricParams
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.report.records import RunRecord
 
-KINDS = ("dead", "stuck", "partial", "bias", "mixed", "intermittent")
+KINDS = ("dead", "stuck", "frozen", "partial", "bias", "mixed", "intermittent")
 
 
 @dataclass(frozen=True)

@@ -4,11 +4,16 @@
 delays (over detectable faults: a curve that stays below 1 shows the faults never
 detected), of the delta-hat error after convergence, and of the deviation ratio to the
 oracle. ``by_kind.png``: per fault kind and mode, box plots of the isolation delay and of
-the deviation ratio to CAP.
+the deviation ratio to CAP. ``isolation_by_kind.png``: the isolation-delay ECDF per fault
+kind, one curve per mode. ``dev_cap_by_scenario.png``: the deviation ratio to CAP per
+scenario and mode. ``sweep_map.png``: per estimating mode, the share of detectable faults
+isolated within 30 s per scenario (rows: the conditions of a sweep) and fault kind, each
+cell annotated with the shares within 5 s / 30 s / never.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -128,9 +133,83 @@ def _by_kind(rows: list[Row], faults: list[Row], path: Path) -> None:
     plt.close(fig)
 
 
-def write_campaign_plots(rows: list[Row], faults: list[Row], out_dir: Path) -> list[Path]:
-    """distributions.png and by_kind.png in out_dir; returns their paths."""
-    paths = [out_dir / "distributions.png", out_dir / "by_kind.png"]
+def _isolation_by_kind(rows: list[Row], faults: list[Row], path: Path) -> None:
+    detectable = [f for f in faults if f["detectable"]]
+    kinds = sorted({f["kind"] for f in detectable}) or ["-"]
+    modes = [m for m in _modes(rows) if m != "cap"]
+    cols = min(3, len(kinds))
+    nrows = math.ceil(len(kinds) / cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(4.0 * cols, 3.2 * nrows), squeeze=False)
+    for ax, kind in zip(axes.flat, kinds, strict=False):
+        for mode in modes:
+            sel = [f for f in detectable if f["variant"] == mode and f["kind"] == kind]
+            _ecdf(ax, [f["isolation_delay_s"] for f in sel], mode, _color(mode, modes))
+        ax.set_title(f"{kind}: isolation delay (s)")
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_ylim(0.0, 1.02)
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+    for ax in list(axes.flat)[len(kinds) :]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+
+
+def _dev_cap_by_scenario(rows: list[Row], path: Path) -> None:
+    fig, ax = plt.subplots(figsize=(11.0, 4.5))
+    modes = [m for m in _modes(rows) if m != "cap"]
+    ok = [{**r, "kind": r["scenario"]} for r in rows if r["status"] == "ok"]
+    _boxes(ax, ok, "dev_ratio_cap", modes, "deviation RMS / CAP's, per scenario")
+    ax.axhline(1.05, color="k", lw=0.8, ls="--")
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+
+
+def _sweep_map(sweep: list[Row], path: Path) -> None:
+    cells = [r for r in sweep if r["kind"] != "healthy" and r["mode"] not in ("cap", "oracle")]
+    modes = list(dict.fromkeys(r["mode"] for r in cells)) or ["-"]
+    scenarios = list(dict.fromkeys(r["scenario"] for r in cells))
+    kinds = sorted({r["kind"] for r in cells})
+    fig, axes = plt.subplots(
+        len(modes),
+        1,
+        figsize=(1.6 * max(len(kinds), 2) + 3.0, 0.6 * max(len(scenarios), 1) * len(modes) + 1.5),
+        squeeze=False,
+    )
+    for ax, mode in zip(axes[:, 0], modes, strict=True):
+        grid = np.full((len(scenarios), len(kinds)), np.nan)
+        for r in cells:
+            if r["mode"] == mode:
+                i, j = scenarios.index(r["scenario"]), kinds.index(r["kind"])
+                grid[i, j] = r["isolated_30s"]
+                text = "/".join(
+                    f"{100 * r[k]:.0f}" for k in ("isolated_5s", "isolated_30s", "never")
+                )
+                ax.text(j, i, f"{text}\n(n={r['faults']})", ha="center", va="center", fontsize=7)
+        ax.imshow(grid, cmap="RdYlGn", vmin=0.0, vmax=1.0, aspect="auto")
+        ax.set_xticks(range(len(kinds)), kinds)
+        ax.set_yticks(range(len(scenarios)), scenarios)
+        ax.set_title(f"{mode}: % isolated <= 5 s / <= 30 s / never (colour: <= 30 s)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+
+
+def write_campaign_plots(
+    rows: list[Row], faults: list[Row], out_dir: Path, sweep: list[Row] | None = None
+) -> list[Path]:
+    """The PNGs of the module docstring in out_dir (``sweep``: the map's rows, from
+    ``campaign_sweep.sweep_rows``; None: no map); returns their paths."""
+    names = ["distributions", "by_kind", "isolation_by_kind", "dev_cap_by_scenario"]
+    paths = [out_dir / f"{name}.png" for name in names]
     _distributions(rows, faults, paths[0])
     _by_kind(rows, faults, paths[1])
+    _isolation_by_kind(rows, faults, paths[2])
+    _dev_cap_by_scenario(rows, paths[3])
+    if sweep is not None:
+        paths.append(out_dir / "sweep_map.png")
+        _sweep_map(sweep, paths[-1])
     return paths

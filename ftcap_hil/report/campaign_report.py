@@ -21,6 +21,7 @@ from ftcap_hil.report.campaign_summary import (
     run_groups,
     write_tables,
 )
+from ftcap_hil.report.campaign_sweep import sweep_rows
 
 RUN_COLUMNS = (
     ("mode", "mode"),
@@ -69,6 +70,9 @@ PERCENT = {
     "never_isolated_share",
     "recovered_share",
     "harm_share",
+    "isolated_5s",
+    "isolated_30s",
+    "never",
 }
 
 
@@ -117,6 +121,43 @@ def _failed(rows: list[Row]) -> list[str]:
     return lines
 
 
+HARM_COLUMNS = (
+    ("run", "key"),
+    ("phase", "phase"),
+    ("dev max (m)", "deviation_max"),
+    ("dev rms (m)", "deviation_rms"),
+    ("CAP (m)", "cap_m"),
+    ("oracle (m)", "oracle_m"),
+    ("dev/CAP", "dev_ratio_cap"),
+    ("dev/oracle", "dev_ratio_oracle"),
+    ("replay", "replay"),
+)
+SWEEP_COLUMNS = (
+    ("mode", "mode"),
+    ("scenario", "scenario"),
+    ("kind", "kind"),
+    ("iso. <= 5 s", "isolated_5s"),
+    ("iso. <= 30 s", "isolated_30s"),
+    ("never", "never"),
+    ("healthy h", "healthy_hours"),
+    ("false-alarm episodes /h", "false_alarm_episodes_per_h"),
+    ("removal switches /h", "removal_switches_per_h"),
+)
+
+
+def _harm_section(harm: list[Row], params: MetricParams) -> list[str]:
+    return [
+        f"## Harm ({len(harm)} run phases)",
+        "",
+        f"A run phase where a mode's {params.harm_statistic.value} deviation exceeds "
+        f"{params.harm_ratio:g} x the larger of CAP's and the oracle's in the same phase "
+        "(no floor; a healthy case's reference is its fault-free run, 0 m).",
+        "",
+        *(markdown_table(harm, HARM_COLUMNS) if harm else ["None."]),
+        "",
+    ]
+
+
 def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]) -> str:
     """The summary; ``info``: name, description, wall_s, workers, scheduler."""
     ok = [r for r in rows if r["status"] == "ok"]
@@ -146,30 +187,14 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "",
         *markdown_table(fault_groups(fault_rows(rows)), FAULT_COLUMNS),
         "",
-        f"## Harm ({len(harm)} run phases)",
+        *_harm_section(harm, params),
+        "## Where the method stops",
         "",
-        f"A run phase where a mode's {params.harm_statistic.value} deviation exceeds "
-        f"{params.harm_ratio:g} x the larger of CAP's and the oracle's in the same phase "
-        "(no floor; a healthy case's reference is its fault-free run, 0 m).",
+        "Per mode, scenario and fault kind: the detectable faults isolated within 5 s, "
+        "within 30 s and never (Wilson 95 %, n faults); per scenario the healthy hours and "
+        "false-alarm episodes per hour (Poisson 95 %, n episodes).",
         "",
-        *(
-            markdown_table(
-                harm,
-                [
-                    ("run", "key"),
-                    ("phase", "phase"),
-                    ("dev max (m)", "deviation_max"),
-                    ("dev rms (m)", "deviation_rms"),
-                    ("CAP (m)", "cap_m"),
-                    ("oracle (m)", "oracle_m"),
-                    ("dev/CAP", "dev_ratio_cap"),
-                    ("dev/oracle", "dev_ratio_oracle"),
-                    ("replay", "replay"),
-                ],
-            )
-            if harm
-            else ["None."]
-        ),
+        *markdown_table(sweep_rows(rows, fault_rows(rows)), SWEEP_COLUMNS),
         "",
         "## Failed runs",
         "",
@@ -178,16 +203,49 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
     return "\n".join(out) + "\n"
 
 
+PLOT_CAPTIONS = {
+    "sweep_map": "Where the method stops: shares isolated within 5 s / 30 s / never",
+    "isolation_by_kind": "Isolation delay per fault kind (ECDF; a curve below 1: never)",
+    "dev_cap_by_scenario": "Deviation RMS over CAP's per scenario (dashed: the 1.05 harm line)",
+    "distributions": "Detection and isolation delays, estimate error, deviation / oracle",
+    "by_kind": "Isolation delay and deviation / CAP per fault kind",
+}
+
+
+def report_markdown(info: dict[str, Any], pictures: list[Path]) -> str:
+    """report.md: the campaign's one page for a reviewer, linking the summary, the tables
+    and embedding the plots (``pictures``: the PNGs written beside it)."""
+    out = [
+        f"# Campaign {info.get('name', '')}: report",
+        "",
+        str(info.get("description", "")),
+        "",
+        "- [summary.md](summary.md): every table, with 95 % intervals and sample sizes, the "
+        "harm list with replay commands, the failed runs",
+        "- [runs.csv](runs.csv), [faults.csv](faults.csv): one row per run / fault episode",
+        "- definitions: docs/campaigns.md of ftcap-hil",
+        "",
+    ]
+    for png in sorted(pictures, key=lambda p: list(PLOT_CAPTIONS).index(p.stem)):
+        out += [f"## {PLOT_CAPTIONS[png.stem]}", "", f"![{png.stem}]({png.name})", ""]
+    return "\n".join(out)
+
+
 def write_report(
     rows: list[Row], params: MetricParams, out_dir: Path, info: dict[str, Any], plots: bool = True
 ) -> list[Path]:
-    """Every output of a campaign from its rows; returns the paths written."""
+    """Every output of a campaign from its rows (tables, summary.md, the plots and
+    report.md linking them); returns the paths written."""
     rows = derive(rows, params)
     written = write_tables(rows, out_dir)
     (out_dir / "summary.md").write_text(summary_markdown(rows, params, info))
     written.append(out_dir / "summary.md")
+    pictures: list[Path] = []
     if plots:
         from ftcap_hil.report.campaign_plots import write_campaign_plots
 
-        written += write_campaign_plots(rows, fault_rows(rows), out_dir)
-    return written
+        faults = fault_rows(rows)
+        pictures = write_campaign_plots(rows, faults, out_dir, sweep_rows(rows, faults))
+        written += pictures
+    (out_dir / "report.md").write_text(report_markdown(info, pictures))
+    return written + [out_dir / "report.md"]

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.config.campaign import MetricParams
-from ftcap_hil.report.intervals import Interval, poisson_rate, wilson_share
+from ftcap_hil.report.intervals import poisson_rate, put_interval, wilson_share
 
 REFERENCE_MODES = ("none", "cap")
 Row = dict[str, Any]
@@ -123,17 +123,6 @@ def _delays(rows: list[Row], key: str, keep: Callable[[Row], bool]) -> list[floa
     return [math.inf if r[key] is None else r[key] for r in rows if keep(r)]
 
 
-def _put(row: Row, name: str, iv: Interval) -> None:
-    """``name`` with its 95 % interval (``_lo``, ``_hi``) and sample size (``_n``: events
-    or trials) into ``row``; None where nothing was measured."""
-
-    def num(x: float) -> float | None:
-        return x if math.isfinite(x) else None
-
-    row[name], row[f"{name}_lo"], row[f"{name}_hi"] = num(iv.value), num(iv.low), num(iv.high)
-    row[f"{name}_n"] = iv.n
-
-
 ISOLATION_WITHIN_S = (5.0, 30.0)  # the shares isolated within these delays (and never)
 
 
@@ -191,11 +180,13 @@ def run_groups(rows: list[Row]) -> list[Row]:
         row = out[-1]
         row["healthy_hours"] = hours
         events = sum(r.get("false_alarm_episodes", 0) for r in ok)
-        _put(row, "false_alarm_episodes_per_h", poisson_rate(events, hours))
+        put_interval(row, "false_alarm_episodes_per_h", poisson_rate(events, hours))
         switches = sum(r.get("removal_switches", 0) for r in ok)
-        _put(row, "removal_switches_per_h", poisson_rate(switches, hours))
+        put_interval(row, "removal_switches_per_h", poisson_rate(switches, hours))
         judged = [r for r in ok if r.get("harm") is not None]
-        _put(row, "harm_share", wilson_share(sum(bool(r["harm"]) for r in judged), len(judged)))
+        put_interval(
+            row, "harm_share", wilson_share(sum(bool(r["harm"]) for r in judged), len(judged))
+        )
     return out
 
 
@@ -226,15 +217,17 @@ def fault_groups(faults: list[Row]) -> list[Row]:
         }
         for name, values in series.items():
             row[f"{name}_median"], row[f"{name}_p95"] = _q(values, 50), _q(values, 95)
-        _put(row, "detected_share", wilson_share(hits, len(det)))
+        put_interval(row, "detected_share", wilson_share(hits, len(det)))
         iso = series["isolation_delay"]
         for limit in ISOLATION_WITHIN_S:
             within = sum(d <= limit for d in iso)
-            _put(row, f"isolated_{limit:g}s_share", wilson_share(within, len(iso)))
-        _put(row, "never_isolated_share", wilson_share(sum(math.isinf(d) for d in iso), len(iso)))
+            put_interval(row, f"isolated_{limit:g}s_share", wilson_share(within, len(iso)))
+        put_interval(
+            row, "never_isolated_share", wilson_share(sum(math.isinf(d) for d in iso), len(iso))
+        )
         ended = [r for r in g if r["ended"]]
         back = sum(r["recovery_s"] is not None for r in ended)
-        _put(row, "recovered_share", wilson_share(back, len(ended)))
+        put_interval(row, "recovered_share", wilson_share(back, len(ended)))
         out.append(row)
     return out
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from scipy.stats import chi2, norm
 
@@ -64,6 +65,17 @@ def wilson_share(successes: int, trials: int, level: float = 0.95) -> Interval:
         z * math.sqrt(p * (1 - p) / trials + z * z / (4 * trials * trials)) / (1 + z * z / trials)
     )
     return Interval(p, max(0.0, centre - half), min(1.0, centre + half), trials, math.nan, level)
+
+
+def put_interval(row: dict[str, Any], name: str, iv: Interval) -> None:
+    """``row[name]`` = the value, ``row[name_lo]`` / ``row[name_hi]`` its 95 % interval and
+    ``row[name_n]`` its sample size (events or trials); None where nothing was measured."""
+
+    def num(x: float) -> float | None:
+        return x if math.isfinite(x) else None
+
+    row[name], row[f"{name}_lo"], row[f"{name}_hi"] = num(iv.value), num(iv.low), num(iv.high)
+    row[f"{name}_n"] = iv.n
 
 
 def hours_for_rate(rate_per_h: float, level: float = 0.95) -> float:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import socket
 import sys
@@ -264,10 +265,48 @@ def _completed(client: Client, futures: dict[Future, RunTask]) -> Iterator[dict[
         fut.release()
 
 
+class ProgressLines:
+    """The campaign's progress where no progress bar can be drawn (a log, a pipe, CI): a
+    line on ``stream`` every ``every_s`` of wall time and at the end: runs done of the
+    total, runs/s since the start, and the time left at that rate."""
+
+    def __init__(self, total: int, every_s: float = 10.0, stream: Any = None) -> None:
+        self.total, self.every_s, self.done = total, every_s, 0
+        self.stream = sys.stderr if stream is None else stream
+        self._t0 = self._last = time.monotonic()
+
+    def update(self, n: int = 1) -> None:
+        """``n`` more runs done; a line if ``every_s`` passed since the last."""
+        self.done += n
+        now = time.monotonic()
+        if now - self._last >= self.every_s or self.done == self.total:
+            self._last = now
+            self.stream.write(self.text(now - self._t0) + "\n")
+            self.stream.flush()
+
+    def text(self, elapsed_s: float) -> str:
+        """``campaign: 12/400 runs (3 %), 0.41 runs/s, about 946 s left``."""
+        rate = self.done / elapsed_s if elapsed_s > 0 else 0.0
+        left = (self.total - self.done) / rate if rate > 0 else math.inf
+        eta = "-" if math.isinf(left) else f"about {left:.0f} s left"
+        pct = 100.0 * self.done / self.total if self.total else 100.0
+        return f"campaign: {self.done}/{self.total} runs ({pct:.0f} %), {rate:.2f} runs/s, {eta}"
+
+    def __enter__(self) -> ProgressLines:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+
 def _progress(total: int, quiet: bool) -> Any:
+    """A progress bar (runs, runs/s, ETA) on a terminal, :class:`ProgressLines` elsewhere,
+    nothing when ``quiet``."""
+    if not quiet and not sys.stderr.isatty():
+        return ProgressLines(total)
     from tqdm import tqdm
 
-    return tqdm(total=total, unit="run", file=sys.stderr, disable=quiet or not sys.stderr.isatty())
+    return tqdm(total=total, unit="run", file=sys.stderr, disable=quiet)
 
 
 def run_campaign(

@@ -175,12 +175,23 @@ def test_a_run_that_raises_is_a_recorded_failure(on_scheduler: Path) -> None:
 
 
 def test_outputs_are_written(embedded: Path) -> None:
-    for name in ("summary.md", "runs.csv", "faults.csv", "distributions.png", "by_kind.png"):
+    pictures = ("distributions", "by_kind", "isolation_by_kind", "dev_cap_by_scenario", "sweep_map")
+    for name in (
+        "summary.md",
+        "report.md",
+        "runs.csv",
+        "faults.csv",
+        *[f"{p}.png" for p in pictures],
+    ):
         assert (embedded / name).stat().st_size > 0, name
     header = (embedded / "runs.csv").read_text().splitlines()[0].split(",")
     assert {"key", "variant", "dev_ratio_oracle", "harm", "false_alarm_rate_per_h"} <= set(header)
+    assert {"false_alarm_episodes_per_h", "removal_switches_per_h"} <= set(header)
     summary = (embedded / "summary.md").read_text()
     assert "| ftcap | dead |" in summary and "| ftcap | healthy |" in summary
+    assert "## Where the method stops" in summary and "| ftcap | paper | dead |" in summary
+    report = (embedded / "report.md").read_text()
+    assert "(summary.md)" in report and all(f"({p}.png)" in report for p in pictures)
 
 
 def test_an_interrupted_campaign_resumes_with_only_what_is_missing(

@@ -1,0 +1,69 @@
+"""Where the method stops: per mode, scenario (a preset in one condition of a sweep) and
+fault kind, the share of detectable faults isolated within 5 s, within 30 s and never, with
+their Wilson 95 % intervals; and per mode and scenario the healthy hours and the
+false-alarm episodes per hour with their Poisson interval.
+
+A sweep is written in a campaign as one ``[[scenario]]`` entry per condition (for example
+the supply vessel in Beaufort 2 to 6, each with its ``[environment]`` levels and its own
+label): the map's rows are those labels, in the campaign's order. Definitions:
+docs/campaigns.md.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from typing import Any
+
+from ftcap_hil.report.intervals import poisson_rate, put_interval, wilson_share
+
+Row = dict[str, Any]
+WITHIN_S = (5.0, 30.0)
+
+
+def _delay(f: Row) -> float:
+    d = f.get("isolation_delay_s")
+    return math.inf if d is None else float(d)
+
+
+def sweep_rows(rows: list[Row], faults: list[Row]) -> list[Row]:
+    """One row per (mode, scenario, fault kind) with detectable faults, and per (mode,
+    scenario) one ``healthy`` row: see the module docstring. Shares are fractions; each
+    value ``x`` has ``x_lo``, ``x_hi`` and ``x_n`` beside it."""
+    order = list(dict.fromkeys(r["scenario"] for r in rows))
+    groups: dict[tuple[str, str, str], list[Row]] = defaultdict(list)
+    for f in faults:
+        if f["mode"] != "none" and f["detectable"]:
+            groups[(f["variant"], f["scenario"], f["kind"])].append(f)
+    out: list[Row] = []
+    for (variant, scenario, kind), g in sorted(
+        groups.items(), key=lambda kv: (kv[0][0], order.index(kv[0][1]), kv[0][2])
+    ):
+        delays = [_delay(f) for f in g]
+        row: Row = {"mode": variant, "scenario": scenario, "kind": kind, "faults": len(g)}
+        for limit in WITHIN_S:
+            put_interval(
+                row, f"isolated_{limit:g}s", wilson_share(sum(d <= limit for d in delays), len(g))
+            )
+        put_interval(row, "never", wilson_share(sum(math.isinf(d) for d in delays), len(g)))
+        out.append(row)
+    return out + _healthy_rows(rows, order)
+
+
+def _healthy_rows(rows: list[Row], order: list[str]) -> list[Row]:
+    hours: dict[tuple[str, str], list[Row]] = defaultdict(list)
+    for r in rows:
+        if r["mode"] not in ("none", "cap", "oracle") and r["status"] == "ok":
+            hours[(r["variant"], r["scenario"])].append(r)
+    out = []
+    for (variant, scenario), g in sorted(
+        hours.items(), key=lambda kv: (kv[0][0], order.index(kv[0][1]))
+    ):
+        h = sum(r["healthy_hours"] for r in g)
+        row: Row = {"mode": variant, "scenario": scenario, "kind": "healthy", "healthy_hours": h}
+        episodes = sum(r.get("false_alarm_episodes", 0) for r in g)
+        put_interval(row, "false_alarm_episodes_per_h", poisson_rate(episodes, h))
+        switches = sum(r.get("removal_switches", 0) for r in g)
+        put_interval(row, "removal_switches_per_h", poisson_rate(switches, h))
+        out.append(row)
+    return out

@@ -1,0 +1,56 @@
+"""The sweep map (report/campaign_sweep.py) and report.md on constructed rows."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from ftcap_hil.report.campaign_report import cell, report_markdown
+from ftcap_hil.report.campaign_sweep import sweep_rows
+
+
+def _fault(scenario: str, delay: float | None, kind: str = "dead", detectable: bool = True) -> dict:
+    return {"variant": "ftcap", "mode": "ftcap", "scenario": scenario, "kind": kind,
+            "detectable": detectable, "isolation_delay_s": delay}  # fmt: skip
+
+
+def _run(scenario: str, hours: float, episodes: int, mode: str = "ftcap") -> dict:
+    return {"variant": mode, "mode": mode, "scenario": scenario, "status": "ok",
+            "healthy_hours": hours, "false_alarm_episodes": episodes,
+            "removal_switches": 0}  # fmt: skip
+
+
+def test_each_condition_of_a_sweep_gets_its_isolation_shares_and_false_alarm_rate() -> None:
+    """Beaufort 3: dead thrusters isolated in 1, 4, 20 s and never; Beaufort 6: never,
+    never; a fault the threshold cannot see is left out; 10 healthy hours with 2 episodes
+    in Beaufort 3; the reference modes get no healthy row."""
+    rows = [_run("bf3", 10.0, 2), _run("bf6", 4.0, 0), _run("bf3", 10.0, 0, mode="cap")]
+    faults = [_fault("bf3", d) for d in (1.0, 4.0, 20.0, None)]
+    faults += [_fault("bf6", None), _fault("bf6", None), _fault("bf6", 3.0, detectable=False)]
+    out = {(r["scenario"], r["kind"]): r for r in sweep_rows(rows, faults)}
+    assert list(out) == [("bf3", "dead"), ("bf6", "dead"), ("bf3", "healthy"), ("bf6", "healthy")]
+    bf3 = out[("bf3", "dead")]
+    assert (bf3["isolated_5s"], bf3["isolated_30s"], bf3["never"]) == (0.5, 0.75, 0.25)
+    assert bf3["isolated_5s_n"] == 4 and bf3["isolated_5s_lo"] == pytest.approx(0.15, abs=0.01)
+    bf6 = out[("bf6", "dead")]
+    assert bf6["faults"] == 2 and bf6["never"] == 1.0 and bf6["isolated_30s"] == 0.0
+    healthy = out[("bf3", "healthy")]
+    assert healthy["healthy_hours"] == 10.0 and healthy["false_alarm_episodes_per_h"] == 0.2
+    assert healthy["false_alarm_episodes_per_h_hi"] == pytest.approx(0.7225, abs=1e-3)
+    assert out[("bf6", "healthy")]["removal_switches_per_h_hi"] == pytest.approx(
+        3.6889 / 4, abs=1e-3
+    )
+    assert cell(bf3, "never") == "25 % [4.56 %, 69.9 %] (4)"
+
+
+def test_the_report_links_the_tables_and_embeds_every_plot() -> None:
+    text = report_markdown(
+        {"name": "sweep", "description": "d"},
+        [Path("x/by_kind.png"), Path("x/sweep_map.png"), Path("x/isolation_by_kind.png")],
+    )
+    assert text.startswith("# Campaign sweep: report")
+    assert "[summary.md](summary.md)" in text and "[faults.csv](faults.csv)" in text
+    images = [ln for ln in text.splitlines() if ln.startswith("![")]
+    assert images == ["![sweep_map](sweep_map.png)", "![isolation_by_kind](isolation_by_kind.png)",
+                      "![by_kind](by_kind.png)"]  # fmt: skip

@@ -39,6 +39,9 @@ A realistic scenario is a scenario file whose ``[plant]`` names a preset
     delay_s = 0.0
     dropout_p = 0.0
 
+    [uncertainty]                  # or: the model error and the truth's departures from
+    mass = 0.2                     # the data sheets drawn per seed (config/uncertainty.py)
+
     [controller]                   # eq. (24) sized to the allocator's inertia
     period_s = 12.0                # natural period of each axis (s)
     damping = 0.9
@@ -73,9 +76,12 @@ from ftcap_hil.config.presets import (
     load_preset,
     preset_names,
 )
+from ftcap_hil.config.realistic_truth import sheet_noise, truth_of
 from ftcap_hil.config.scenario_tables import scenario_from
 from ftcap_hil.config.tables import Table
+from ftcap_hil.config.uncertainty import ADDED_MASS, Drawn, Uncertainty
 from ftcap_hil.config.vessel import PlantKind
+from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.estimation.config import EstimatorConfig
@@ -83,12 +89,13 @@ from ftcap_hil.core.estimation.shaft_types import DriveModel
 from ftcap_hil.core.models.controllers import PoseController
 from ftcap_hil.core.models.plants import Inversion
 from ftcap_hil.core.scenario import Integrator, Scenario
-from sim.environment import CurrentConfig, Environment, WindConfig
+from sim.environment import CurrentConfig, Environment, EnvironmentConfig, WindConfig
 from sim.sensors import SensorConfig
-from sim.thrusters import DEFAULT_PROPELLER, ThrusterBankConfig
 from sim.truth import TruthConfig
 
-OWN_TABLES = ("plant", "conditions", "environment", "mismatch", "sensor", "controller")
+OWN_TABLES = (
+    "plant", "conditions", "environment", "mismatch", "sensor", "controller", "uncertainty",
+)  # fmt: skip
 # tables of a plain scenario that would be silently replaced here, and what replaces them
 PLAIN_ONLY = {
     "vessel": "the thrusters are the preset's ([plant] preset, [mismatch])",
@@ -138,20 +145,16 @@ def parse_realistic(data: dict[str, Any], where: str) -> Scenario:
     substeps = plant_t.integer("substeps", 4, lo=1)
     plant_t.finish()
     errors = _drive_errors(root.table("mismatch"))
-    told = _allocator_model(preset, root.table("mismatch"), inversion)
+    unc = Uncertainty.read(root.table("uncertainty"))
+    drawn = unc.draw(seed, preset.thrusters.m) if unc.any else None
+    told = _allocator_model(preset, root.table("mismatch"), inversion, drawn)
     with Table(_common_tables(data, told.thrusters, preset.diagnosis), where) as common:
         sc = scenario_from(common)
-    truth, sensor = _truth(preset, root, seed, substeps, sc.dt_s)
+    stated = environment_levels(root.table("environment"), preset.environment)
+    truth, sensor = truth_of(preset, root, seed, substeps, sc.dt_s, stated, drawn)
     controller = _controller(root.table("controller"), np.diag(told.vessel.mass_matrix))
-    core = sc.core
-    if truth.bank.time_constant_s.any():  # the allocator is told the thrusters' lag
-        core = dataclasses.replace(core, thruster_lag_s=tuple(truth.bank.time_constant_s.tolist()))
-    if core.estimator.measurement_std is None and sensor is not None:
-        std = tuple(float(v) for v in sensor.noise_std)  # pose and velocities: PoseStep
-        core = dataclasses.replace(
-            core, estimator=dataclasses.replace(core.estimator, measurement_std=std)
-        )
-    core = dataclasses.replace(core, estimator=_told_waves(core.estimator, truth))
+    core = _told_sheets(sc.core, preset, truth, sensor)
+    core = dataclasses.replace(core, estimator=_told_waves(core.estimator, truth, stated))
     return dataclasses.replace(
         sc,
         plant=told.vessel,
@@ -199,14 +202,34 @@ def _drives_told(
     return data_sheet(preset.drives.actuators, full, truth.bank.time_constant_s, errors)
 
 
-def _told_waves(est: EstimatorConfig, truth: TruthConfig) -> EstimatorConfig:
+def _told_sheets(
+    core: CoreConfig, preset: VesselPreset, truth: TruthConfig, sensor: SensorConfig | None
+) -> CoreConfig:
+    """The allocator is told the data sheets: each thruster's lag as the preset states it
+    (when the truth has lag) and, unless the file sets ``[estimator] measurement_std``, the
+    preset's sensor noise levels, whatever the truth's draw (:mod:`config.uncertainty`)."""
+    if truth.bank.time_constant_s.any():
+        core = dataclasses.replace(core, thruster_lag_s=tuple(preset.time_constants_s.tolist()))
+    if core.estimator.measurement_std is None and sensor is not None:
+        std = tuple(float(v) for v in sheet_noise(preset))  # pose and velocities: PoseStep
+        core = dataclasses.replace(
+            core, estimator=dataclasses.replace(core.estimator, measurement_std=std)
+        )
+    return core
+
+
+def _told_waves(
+    est: EstimatorConfig, truth: TruthConfig, stated: EnvironmentConfig
+) -> EstimatorConfig:
     """The estimator is told the sea state as a DP system's wave model is tuned: the peak
-    period and the first-order load's level per axis (here measured over 10 minutes at rest
-    on another realisation of the same sea state: a different seed), unless the file sets
+    period and the first-order load's level per axis of the sea the scenario states (a
+    forecast: the truth's may be drawn off it, :mod:`config.uncertainty`), measured over 10
+    minutes at rest on another realisation of it (a different seed), unless the file sets
     ``[estimator] wave_period_s``."""
     env = truth.environment
     if env is None or truth.hull is None or not env.waves.enabled or est.wave_period_s > 0.0:
         return est
+    env = dataclasses.replace(stated, seed=env.seed)
     sea = Environment(dataclasses.replace(env, current=CurrentConfig(), wind=WindConfig()),
                       truth.hull, seed=env.seed + 1)  # fmt: skip
     t = np.arange(0.0, 600.0, env.waves.tp_s / 20.0)
@@ -222,8 +245,14 @@ def _seed(data: dict[str, Any], where: str) -> int:
     return seed
 
 
-def _allocator_model(preset: VesselPreset, mm: Table, inversion: Inversion) -> AllocatorModel:
-    """The allocator's model: the preset with the file's mismatch (else the preset's own)."""
+def _allocator_model(
+    preset: VesselPreset, mm: Table, inversion: Inversion, drawn: Drawn | None = None
+) -> AllocatorModel:
+    """The allocator's model: the preset with the file's mismatch (else the preset's own),
+    or with this seed's ``drawn`` model error (then ``[mismatch]`` may state only the drives'
+    data-sheet errors)."""
+    if drawn is not None:
+        return _drawn_model(preset, mm, inversion, drawn)
     kwargs: dict[str, Any] = {}
     if mm.has("mass"):
         kwargs["mass"] = mm.number("mass", lo=-0.9)
@@ -244,6 +273,27 @@ def _allocator_model(preset: VesselPreset, mm: Table, inversion: Inversion) -> A
         kwargs["position_m"] = {k: tuple(v) for k, v in positions.items()}
     told = apply_mismatch(preset, **kwargs)
     vessel = dataclasses.replace(told.vessel, inversion=inversion)
+    return dataclasses.replace(told, vessel=vessel)
+
+
+def _drawn_model(
+    preset: VesselPreset, mm: Table, inversion: Inversion, drawn: Drawn
+) -> AllocatorModel:
+    for key in ("mass", "damping", "angle_deg", "position_m"):
+        if mm.has(key):
+            raise mm.error(key, "the model error is drawn ([uncertainty]): state it there only")
+    mm.finish()
+    names = [t.name for t in preset.thrusters.thrusters]
+    told = apply_mismatch(
+        preset,
+        mass=drawn.mass - 1.0,
+        damping=drawn.damping - 1.0,
+        angle_deg={names[i]: a for i, a in drawn.angle_deg.items()},
+        position_m={},
+    )
+    v = told.vessel
+    added = {k: getattr(v, k) * drawn.added_mass for k in ADDED_MASS}
+    vessel = dataclasses.replace(v, inversion=inversion, **added)
     return dataclasses.replace(told, vessel=vessel)
 
 
@@ -275,70 +325,3 @@ def _controller(t: Table, inertia: np.ndarray) -> PoseController:
     damping = t.number("damping", 0.9, positive=True)
     t.finish()
     return PoseController.for_vessel(inertia, period, damping)
-
-
-def _truth(
-    preset: VesselPreset, root: Table, seed: int, substeps: int, dt_s: float
-) -> tuple[TruthConfig, SensorConfig | None]:
-    cond = root.table("conditions")
-    env_on = cond.boolean("environment", True)
-    sensors_on = cond.boolean("sensors", True)
-    lag_on = cond.boolean("thruster_lag", True)
-    quant_on = cond.boolean("quantization", True)
-    telemetry_on = cond.boolean("drive_telemetry", True)
-    reverse = cond.number("reverse_gain", 1.0, positive=True)
-    deadband = cond.number("deadband_rel", 0.0, lo=0.0, hi=0.5)
-    cond.finish()
-    ths = preset.thrusters
-    u_abs = np.maximum(np.abs(ths.u_min), np.abs(ths.u_max))
-    seeds = np.random.SeedSequence(seed).spawn(3)
-    drives, feedback = preset.drives, None
-    bank = ThrusterBankConfig.create(
-        ths.m,
-        time_constant_s=preset.time_constants_s.tolist() if lag_on else 0.0,
-        reverse_gain=reverse,
-        deadband_n=(deadband * u_abs).tolist(),
-        u_max_abs=u_abs.tolist() if quant_on else None,
-        actuator=drives.actuators if drives is not None else DEFAULT_PROPELLER,
-        full_force_n=u_abs.tolist(),
-        seed=int(seeds[2].generate_state(1)[0]),
-    )
-    if drives is not None and telemetry_on:
-        feedback = dataclasses.replace(drives.feedback, seed=int(seeds[2].generate_state(2)[1]))
-    sensor = _sensor(preset, root.table("sensor"), int(seeds[1].generate_state(1)[0]), dt_s)
-    levels = environment_levels(root.table("environment"), preset.environment)
-    env = dataclasses.replace(levels, seed=int(seeds[0].generate_state(1)[0]))
-    truth = TruthConfig(
-        vessel=preset.vessel,
-        B=preset.B,
-        bank=bank,
-        hull=preset.hull,
-        environment=env if env_on else None,
-        sensor=sensor if sensors_on else None,
-        substeps=substeps,
-        seed=int(seeds[0].generate_state(1)[0]),
-        feedback=feedback,
-    )
-    return truth, truth.sensor
-
-
-def _sensor(preset: VesselPreset, t: Table, seed: int, dt_s: float) -> SensorConfig:
-    s = preset.sensors
-    noise = np.array(
-        [s.position_std_m, s.position_std_m, s.heading_std_rad,
-         s.velocity_std_m_s, s.velocity_std_m_s, s.yaw_rate_std_rad_s]
-    )  # fmt: skip
-    bias_rel = t.number("bias_rel", 0.0, lo=0.0)
-    bias_tau = t.number("bias_tau_s", 60.0, positive=True)
-    delay = t.number("delay_s", 0.0, lo=0.0)
-    dropout = t.number("dropout_p", 0.0, lo=0.0, hi=1.0)
-    t.finish()
-    return SensorConfig(
-        noise_std=noise,
-        bias_std=bias_rel * noise,
-        bias_tau_s=np.full(6, bias_tau),
-        rate_hz=1.0 / dt_s,
-        delay_s=delay,
-        dropout_p=dropout,
-        seed=seed,
-    )

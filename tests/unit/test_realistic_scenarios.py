@@ -224,7 +224,7 @@ def _valid_keys(doc: dict, table: str) -> list[str]:
 
 
 # [diagnosis] is DiagnosisConfig's, as the section says, not listed key by key
-TABLES = ("plant", "conditions", "mismatch", "sensor", "controller")
+TABLES = ("plant", "conditions", "mismatch", "sensor", "controller", "uncertainty")
 TABLES += ("environment.current", "environment.wind", "environment.waves")
 
 

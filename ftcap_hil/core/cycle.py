@@ -167,6 +167,14 @@ class FtcapCore:
             self.shaft = ShaftDiagnoser(drives, self.config.diagnosis)
         self._motion_only_s = np.zeros(self.m)  # a motion-only removal held this long
         self._period_s = period_s
+        self._estimates = self.config.mode.estimates
+        # Pure functions of their inputs, kept while those are the very same objects (a
+        # cycle without a new sample: the stage hands back its last output): the judged
+        # output, and the excitation of a cycle that does not advance it.
+        self._no_evidence = Evidence.none(self.m)
+        self._judged: tuple[Evidence, StageOutput, Judged, bool] | None = None
+        self._excited: tuple[Judged, int, tuple[FloatArray | None, FloatArray | None]] | None
+        self._excited = None
 
     def _size_excitation(self, estimation_dt_s: float) -> None:
         """Raise the dither and probe amplitudes to what the sensor's noise needs (see
@@ -183,6 +191,7 @@ class FtcapCore:
         self.excitation.config = sized
         self.config = replace(self.config, excitation=sized)
         self._unsized = False
+        self._excited = None
 
     def _make_stage(self, plant: PlantModel | None) -> EstimationStage:
         cfg = self.config
@@ -229,7 +238,7 @@ class FtcapCore:
         joins the evidence (:meth:`Evidence.with_shaft`).
         """
         w, u_sample = self._sample(w, self.u_prev if u_sample is None else u_sample)
-        ev = Evidence.none(self.m) if evidence is None else evidence
+        ev = self._no_evidence if evidence is None else evidence
         verdict = None
         if self.shaft is not None and t_s is not None:
             verdict, u_sample = self._diagnose(feedback, t_s, w is not None, u_sample)
@@ -237,7 +246,7 @@ class FtcapCore:
         if verdict is not None:
             confirmed = self._motion_confirmed(out, verdict, elapsed_s)
             ev = ev.with_shaft(verdict, confirmed, self.config.diagnosis.motion)
-        seen = apply_evidence(ev, out, self.config.allocator.dead_threshold, self.B)
+        seen, restorable = self._judge(ev, out)
         u_pref, probe = self._excite(seen, advance=w is not None)
 
         def allocate(delta: FloatArray) -> Allocation:
@@ -245,7 +254,9 @@ class FtcapCore:
                 tau_d, delta, seen.bf, self.u_prev, u_pref, probe, elapsed_s
             )
 
-        alloc = self._unremove_if_short(allocate(seen.delta), seen, allocate)
+        alloc = allocate(seen.delta)
+        if restorable:
+            alloc = self._unremove_if_short(alloc, seen, allocate)
         self.u_prev = alloc.u
         if self.shaft is not None and t_s is not None:
             self.shaft.command(t_s, alloc.u)
@@ -255,10 +266,21 @@ class FtcapCore:
             alloc,
             seen.faulty,
             np.zeros(self.m, dtype=bool) if probe is None else probe > 0,
-            estimation_frozen=self.config.mode.estimates and w is None,
+            estimation_frozen=self._estimates and w is None,
             decision=out.decision,
             shaft=verdict,
         )
+
+    def _judge(self, ev: Evidence, out: StageOutput) -> tuple[Judged, bool]:
+        """:func:`apply_evidence` (kept while ``ev`` and ``out`` are the same objects) and
+        whether any thruster is restorable."""
+        last = self._judged
+        if last is not None and last[0] is ev and last[1] is out:
+            return last[2], last[3]
+        seen = apply_evidence(ev, out, self.config.allocator.dead_threshold, self.B)
+        restorable = True in seen.restorable.tolist()
+        self._judged = (ev, out, seen, restorable)
+        return seen, restorable
 
     def _sample(self, w: Sample | None, u_sample: FloatArray) -> tuple[Sample | None, FloatArray]:
         """The sample the stage gets (None if non-finite, or so large its sum overflows)
@@ -303,12 +325,17 @@ class FtcapCore:
         otherwise); a quiet thruster (known dead) gets neither: exactly 0."""
         if self.config.mode is not Mode.FTCAP:
             return None, None
+        cycle = self.excitation.cycle
+        last = self._excited
+        if not advance and last is not None and last[0] is seen and last[1] == cycle:
+            return last[2]  # the same inputs at the same point of the sequence
         dead = seen.delta < self.config.allocator.dead_threshold
         exc = self.excitation(seen.delta, dead, advance=advance, still=seen.no_dither)
         u_pref, probe = exc.u_pref, exc.probe_limit
-        if seen.quiet.any():
+        if True in seen.quiet.tolist():
             u_pref = np.where(seen.quiet, 0.0, u_pref)
             probe = np.where(seen.quiet, 0.0, probe)
+        self._excited = (seen, cycle, (u_pref, probe))
         return u_pref, probe
 
     def _unremove_if_short(
@@ -329,7 +356,7 @@ class FtcapCore:
         Commanded at its estimate it still pushes, and its data start flowing again.
         """
         back = seen.restorable
-        if not back.any():
+        if True not in back.tolist():
             return alloc
         short = np.abs(alloc.unallocated) / self.scale
         if short.max() <= SHORT_FRACTION:
@@ -346,9 +373,11 @@ class FtcapCore:
         if allocator is not None:
             self.allocator.retune(allocator)
             self.config = replace(self.config, allocator=allocator)
+            self._judged = None  # judged with the old dead threshold
         if excitation is not None:
             self.excitation.config = excitation
             self.config = replace(self.config, excitation=excitation)
+        self._excited = None
 
     def reset_command(self, u: FloatArray | None = None) -> None:
         """Tell the core what is on the actuators now (e.g. zero after a watchdog stop)."""

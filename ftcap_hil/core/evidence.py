@@ -113,7 +113,7 @@ def apply_evidence(
         shaft_out = evidence.shaft.actionable & (evidence.shaft.delta < dead_threshold)
     taken = evidence.out
     est, delta = out.estimate, out.delta_alloc
-    if taken.any():
+    if True in taken.tolist():
         est = replace(est, delta_hat=np.where(taken, 0.0, est.delta_hat))
         delta = np.where(taken, 0.0, delta)
     dec = out.decision

@@ -19,6 +19,7 @@ If the QP backend fails, the clipped pseudo-inverse is used and the allocation i
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -110,6 +111,7 @@ class Allocator:
         self._solver = make_solver(self.config.backend, self._B.shape[1])
         self._small_demand = _MAX_DEMAND * float(self._scale.min())  # below: never shrunk
         self._h_key: FloatArray | None = None  # delta_hat that _beff and _H were built for
+        self._h_list: list[float] = []  # the same as a list (the common case: unchanged)
         self._beff = self._B.copy()
         self._H = np.zeros((self._B.shape[1],) * 2)
         self.retune(self.config)
@@ -122,6 +124,8 @@ class Allocator:
         self.config = config
         self._qs = config.slack_weight / self._scale**2
         self._ru = config.effort_weight / self._u_range**2
+        self._qs_col = self._qs[:, None]  # H's parts that delta_hat does not change
+        self._ru_d2 = self._ru * self._D**2
         self._h_key = None
 
     @property
@@ -134,13 +138,29 @@ class Allocator:
         only when delta_hat moved by more than _DELTA_STILL since the last build: the same H
         array handed back lets the proxsuite workspace skip its set-up (docs/decisions.md)."""
         key = self._h_key
-        if key is None or np.abs(delta_hat - key).max() > _DELTA_STILL:
+        if key is None or (
+            delta_hat.tolist() != self._h_list and np.abs(delta_hat - key).max() > _DELTA_STILL
+        ):
             beff = self._B * delta_hat
             scaled = beff * self._D
-            H = scaled.T @ (self._qs[:, None] * scaled)
-            H.flat[:: H.shape[0] + 1] += self._ru * self._D**2
+            H = scaled.T @ (self._qs_col * scaled)
+            H.flat[:: H.shape[0] + 1] += self._ru_d2
             self._h_key, self._beff, self._H = delta_hat.copy(), beff, H
+            self._h_list = self._h_key.tolist()
         return self._beff, self._H
+
+    def _shrunk(self, target: FloatArray) -> FloatArray:
+        """``target`` (k,), or the same direction at _MAX_DEMAND times S when it is larger
+        (a NaN anywhere: as it is, as numpy's max would leave it)."""
+        values = target.tolist()
+        peak = max(map(abs, values))
+        if peak > self._small_demand and all(v == v for v in values):
+            unit = target / peak  # finite even for a 1e308 demand (target / scale would not be)
+            reach = np.abs(unit / self._scale).max()  # |target| / S = reach * peak
+            if reach > _MAX_DEMAND / peak:  # keep the direction, drop the absurd magnitude
+                shrunk: FloatArray = unit * (_MAX_DEMAND / reach)
+                return shrunk
+        return target
 
     def bounds(
         self,
@@ -154,7 +174,7 @@ class Allocator:
         live = ~dead
         u_min = self._u_min * live
         u_max = self._u_max * live
-        if probe_limit is not None and probe_limit.any():
+        if probe_limit is not None and any(probe_limit.tolist()):
             probing = dead & (probe_limit > 0)
             u_min = np.where(probing, np.maximum(self._u_min, -probe_limit), u_min)
             u_max = np.where(probing, np.minimum(self._u_max, probe_limit), u_max)
@@ -185,22 +205,18 @@ class Allocator:
                 self._step_at = (dt_s, self._thrusters.max_step(dt_s))
             step = self._step_at[1]
         status = AllocationStatus.OK
-        if not np.isfinite(tau_d).all():
+        # Python floats on the short vectors below: numpy's reductions cost several times more
+        tau_d = np.asarray(tau_d, dtype=np.float64)
+        if not all(map(math.isfinite, tau_d.tolist())):
             tau_d = np.zeros_like(bf_hat)
             status = AllocationStatus.INVALID_DEMAND
         dead = delta_hat < self.config.dead_threshold
-        if dead.any():
+        if True in dead.tolist():
             lo, hi = self.bounds(u_prev, dead, probe_limit, step)
         else:
             lo, hi = command_bounds(self._u_min, self._u_max, step, u_prev)
         beff, H = self._effective(delta_hat)
-        target = tau_d - bf_hat
-        peak = np.abs(target).max()
-        if peak > self._small_demand:
-            unit = target / peak  # finite even for a 1e308 demand (target / scale would not be)
-            reach = np.abs(unit / self._scale).max()  # |target| / S = reach * peak
-            if reach > _MAX_DEMAND / peak:  # keep the direction, drop the absurd magnitude
-                target = unit * (_MAX_DEMAND / reach)
+        target = self._shrunk(tau_d - bf_hat)
         g = beff.T @ (self._qs * target)
         g = -g if u_pref is None else -g - self._ru * u_pref
         D = self._D

@@ -82,6 +82,11 @@ class Excitation:
         self._idx: IntArray = np.zeros(0, dtype=np.intp)
         self._basis = np.zeros((0, 0))
 
+    @property
+    def cycle(self) -> int:
+        """How many times the sequence has advanced (calls with ``advance``)."""
+        return self._cycle
+
     def _null_basis(self, delta_hat: FloatArray, live: BoolArray) -> tuple[IntArray, FloatArray]:
         """Live thruster indices and the null space of the scaled live effective matrix;
         recomputed only when delta_hat moved by more than 1e-3 or the live set changed (an
@@ -129,11 +134,13 @@ class Excitation:
         quiet = dead if still is None else dead | still
         # The PRBS level only changes at period boundaries; a change of the dead set must
         # not leave a stale dither on a thruster that has just been taken out.
-        if level != self._cached_level or (quiet.any() and (self._cached[quiet] != 0.0).any()):
+        if level != self._cached_level or (
+            True in quiet.tolist() and (self._cached[quiet] != 0.0).any()
+        ):
             self._cached = self._null_dither(delta_hat, ~quiet)
             self._cached_level = level
         u_pref, limit = self._cached, self._zero
-        if cfg.probe_interval and cfg.probe_amplitude and dead.any():
+        if cfg.probe_interval and cfg.probe_amplitude and True in dead.tolist():
             phase = self._cycle % cfg.probe_interval
             if phase < cfg.probe_length:
                 sign = 1.0 if phase % 2 == 0 else -1.0

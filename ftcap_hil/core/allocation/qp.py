@@ -55,7 +55,9 @@ def _accepted(
     (a NaN propagates through maximum/minimum and fails the comparison). minimum(maximum())
     rather than np.clip: the same result, cheaper on short vectors."""
     clipped = np.minimum(np.maximum(x, lo), hi)
-    if np.abs(x - clipped).max(initial=0.0) <= tol:
+    # max |x - clipped| <= tol, a NaN failing it; Python's all() over the list is several
+    # times cheaper than a numpy reduction on (m,)
+    if all(d <= tol for d in np.abs(x - clipped).tolist()):
         return BoxQpSolution(clipped, True, iterations)
     return BoxQpSolution(x, False, iterations)
 
@@ -124,6 +126,16 @@ class ProxqpBoxSolver:
         return _accepted(x, lo, hi, 1e-7, info.iter)
 
 
+def _bound_size(hi: FloatArray, lo: FloatArray) -> float:
+    """max(1, the largest |bound| below _BIG; a NaN one left out). In Python floats: several
+    times cheaper than numpy's masked reduction on (m,)."""
+    size = 1.0
+    for b in hi.tolist() + lo.tolist():
+        if size < abs(b) < _BIG:
+            size = abs(b)
+    return size
+
+
 class DaqpBoxSolver:
     """daqp's dual active-set solver for box QPs of size ``n`` (no persistent workspace)."""
 
@@ -152,9 +164,7 @@ class DaqpBoxSolver:
         iterations = int(info.get("iterations", 0)) if isinstance(info, dict) else 0
         if exitflag < 1:
             return BoxQpSolution(x, False, iterations)
-        bounds = np.abs(np.concatenate([hi_f, lo_f]))
-        size = max(1.0, float(np.max(bounds[bounds < _BIG], initial=0.0)))
-        return _accepted(x, lo, hi, self.PRIMAL_TOL * size, iterations)
+        return _accepted(x, lo, hi, self.PRIMAL_TOL * _bound_size(hi_f, lo_f), iterations)
 
 
 class QpsolversBoxSolver:

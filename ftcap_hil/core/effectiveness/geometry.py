@@ -101,7 +101,7 @@ def command_bounds(
     lo = np.maximum(u_min, u_prev - max_step)
     hi = np.minimum(u_max, u_prev + max_step)
     empty = lo > hi
-    if empty.any():
+    if True in empty.tolist():  # ndarray.any() costs several times this on (m,)
         toward = np.clip(u_prev, u_min, u_max)
         point = u_prev + np.clip(toward - u_prev, -max_step, max_step)
         lo = np.where(empty, point, lo)

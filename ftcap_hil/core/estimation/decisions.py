@@ -90,6 +90,8 @@ class FaultDecider:
         self._base: FloatArray | None = None
         self._samples = 0
         self._base_var = np.zeros((self._k, self._k))
+        self._eps = 1e-18 * np.eye(self._k)  # keeps the attribution's weight invertible
+        self._range_min = float(np.min(self._range))
 
     def update(self, out: FilterOutput, dt_s: float) -> Decision:
         """Decisions after one filter update of an estimation interval ``dt_s``."""
@@ -112,16 +114,11 @@ class FaultDecider:
         self._in_use = delta_alloc < 1.0
         f = np.where(self._bias_on, self._f, 0.0)
         bf = est.bf_hat if self.config.bias_compensation is BiasCompensation.ALL else self._B @ f
+        # the state arrays are replaced, never written in place: handed out without copies
         return Decision(
-            delta_alloc,
-            f,
-            bf,
-            self._in_use.copy(),
-            self._removed.copy(),
-            self._faulty.copy(),
-            self._bias_on.copy(),
+            delta_alloc, f, bf, self._in_use, self._removed, self._faulty, self._bias_on,
             observable,
-        )
+        )  # fmt: skip
 
     def _optimistic(self, d: FloatArray, sigma: FloatArray) -> FloatArray:
         upper = np.minimum(1.0, d + self.config.z_use * sigma)
@@ -146,20 +143,21 @@ class FaultDecider:
     def _bias(self, b: FloatArray, cov: FloatArray, dt_s: float, alarm: bool) -> None:
         # The baseline moves only while b is known to within the smallest bias acted upon
         # (not in the re-convergence after a change alarm, when a fault's bias would leak in).
-        small = self.config.bias_min_rel * float(np.min(self._range))
-        settled = bool(np.max(np.diag(cov)) < small**2) and not alarm
+        small = self.config.bias_min_rel * self._range_min
+        # max(diag) < small^2 (a NaN: not settled), in Python floats
+        settled = not alarm and all(v < small**2 for v in cov.diagonal().tolist())
         if self._base is None:
             if settled:
                 self._base, self._base_var, self._samples = b.copy(), cov.copy(), 1
             return
         self._samples += 1
-        if not self._bias_on.any() and settled:
+        if True not in self._bias_on.tolist() and settled:
             # the running mean of the samples so far at first, then the time constant
             a = min(1.0, max(dt_s / self.config.bias_base_s, 1.0 / self._samples))
             self._base = self._base + a * (b - self._base)
             self._base_var = (1.0 - a) ** 2 * self._base_var + a**2 * cov
         delta_b = b - self._base
-        sigma = cov + self._base_var + 1e-18 * np.eye(self._k)
+        sigma = cov + self._base_var + self._eps
         self._attribute(delta_b, inv_small(sigma))
 
     def _attribute(self, delta_b: FloatArray, w: FloatArray) -> None:
@@ -167,7 +165,7 @@ class FaultDecider:
         z, dof = self.config.z_flag, self._k - 1
         # No single column can explain more than the whole change: below the (hysteresis)
         # level nothing can be attributed, the common case of healthy operation.
-        need_min = 0.5 * z if self._bias_on.any() else z
+        need_min = 0.5 * z if True in self._bias_on.tolist() else z
         if float(delta_b @ w @ delta_b) < need_min**2:
             self._bias_on, self._f = np.zeros(self._m, dtype=bool), np.zeros(self._m)
             return
@@ -184,7 +182,7 @@ class FaultDecider:
             need = np.where(keep_on, 0.5 * z, z)  # hysteresis: half the level to stay on
             big = np.abs(f) >= self.config.bias_min_rel * self._range
             ok = (score > need) & big & ~on
-            if not ok.any():
+            if True not in ok.tolist():
                 break
             i = int(np.argmax(np.where(ok, score, -np.inf)))
             rest = rest - c[:, i] * f[i]

@@ -199,7 +199,8 @@ class KalmanEstimator:
                 self.z[:ks] = y
                 return self._output(0.0, False, np.zeros(m))
             self.z[:ks] = self._model.dynamic_state(x_prev)
-        z_post, P_post = self.z.copy(), self.P.copy()
+        # P is only ever replaced, never written in place, from here on: no copy needed
+        z_post, P_post = self.z.copy(), self.P
         s_pred, F = self._predict(u, dt_s)
         e = self._model.innovation(y, s_pred)
         S_inv = inv_small(self.P[:ks, :ks] + self._R)
@@ -240,10 +241,11 @@ class KalmanEstimator:
         self.z = self.z + K @ e
         IKH = self._IKH
         IKH[:, :ks] = -K
-        IKH[self._s_diag] += 1.0
+        s_diag = IKH.reshape(-1)[: ks * (self._n + 1) : self._n + 1]  # a view: I's first ks
+        s_diag += 1.0
         P = IKH @ self.P @ IKH.T + K @ self._R @ K.T
         IKH[:, :ks] = 0.0  # back to the identity (the diagonal of the first k columns too)
-        IKH[self._s_diag] = 1.0
+        s_diag[:] = 1.0
         self.P = 0.5 * (P + P.T)
 
     def _project(self) -> None:
@@ -253,6 +255,8 @@ class KalmanEstimator:
         drift along the unobservable directions while commands saturated."""
         ks, m = self._ks, self._m
         d = self.z[ks : ks + m]
+        if all(0.0 <= v <= 1.0 or v != v for v in d.tolist()):
+            return  # the common case, decided in Python floats (NaN: never active)
         low, high = d < 0.0, d > 1.0
         active = np.flatnonzero(low | high)
         if active.size == 0:
@@ -290,7 +294,8 @@ class KalmanEstimator:
         P = F @ self.P @ F.T
         Gq = G * self._model_std
         P[:ks, :ks] += self.q_scale * (Gq @ Gq.T)
-        P[self._theta_diag] += self._q_theta * dt
+        n1 = self._n + 1
+        P.reshape(-1)[ks * n1 : e * n1 : n1] += self._q_theta * dt  # a view of P's diagonal
         if wave is not None:
             P[e:we, e:we] += wave.q
             self.z[e:we] = wave.phi @ self.z[e:we]
@@ -381,7 +386,7 @@ class KalmanEstimator:
         ks, m = self._ks, self._m
         delta = self.z[ks : ks + m].copy()
         bf = self.z[ks + m : self._theta_end].copy()
-        var = np.diag(self.P)[ks : ks + m].copy()
+        var = self.P.diagonal()[ks : ks + m].copy()
         est = Estimate(
             delta,
             bf,

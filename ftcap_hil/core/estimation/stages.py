@@ -48,8 +48,13 @@ class Observation:
 
     def finite(self) -> bool:
         """Both states finite and dt a positive finite number."""
-        total = float(np.sum(self.x_prev)) + float(np.sum(self.x_now))
+        total = _total(self.x_prev) + _total(self.x_now)
         return math.isfinite(total) and math.isfinite(self.dt_s) and self.dt_s > 0.0
+
+
+def _total(x: FloatArray) -> float:
+    """sum(x) (the method where it is an array: a third of np.sum's cost on a 6-vector)."""
+    return float(x.sum() if isinstance(x, np.ndarray) else np.sum(x))
 
 
 Sample = Observation | FloatArray

@@ -180,6 +180,8 @@ class VesselStep:
     def _one(
         self, s0: FloatArray, w: FloatArray, dt: float
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        if self._euler and isinstance(self.plant, SurfaceVessel):
+            return self._one_paper(s0, w, dt)
         f0 = self.plant.nu_dot(s0, w)
         j0 = self._jacobian(s0, w, f0)
         if self._euler:
@@ -195,6 +197,35 @@ class VesselStep:
         A[np.diag_indices(3)] += 1.0
         G = dt * (self._minv + j1 @ (0.5 * dt * self._minv))
         return s0 + dt * f1, A, G
+
+    def _one_paper(
+        self, s0: FloatArray, w: FloatArray, dt: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The "euler" step of the paper's vessel in Python floats: SurfaceVessel.nu_dot and
+        the analytic Jacobian's operations in their order (the same result to the last bit),
+        without numpy's per-call overhead on 3-vectors."""
+        p = self.plant
+        assert isinstance(p, SurfaceVessel)
+        u, v, r = s0.tolist()
+        w0, w1, w2 = w.tolist()
+        m, iz = p.mass_kg, p.iz_kgm2
+        au, av, ar = abs(u), abs(v), abs(r)
+        f = (
+            (w0 - (-m * r * v + p.beta_u * au * u)) / m,
+            (w1 - (m * r * u + p.beta_v * av * v)) / m,
+            (w2 - p.beta_r * ar * r) / iz,
+        )
+        # A = I + dt J, J = -dn / diag(M) (VesselStep._jacobian)
+        bu, bv, br = 2.0 * p.beta_u * au, 2.0 * p.beta_v * av, 2.0 * p.beta_r * ar
+        A = np.array(
+            [
+                [dt * (-bu / m) + 1.0, dt * (-(-m * r) / m), dt * (-(-m * v) / m)],
+                [dt * (-(m * r) / m), dt * (-bv / m) + 1.0, dt * (-(m * u) / m)],
+                [dt * (-0.0 / iz), dt * (-0.0 / iz), dt * (-br / iz) + 1.0],
+            ]
+        )
+        s1 = np.array([u + dt * f[0], v + dt * f[1], r + dt * f[2]])
+        return s1, A, dt * self._minv
 
 
 def _rotation(psi: float) -> tuple[FloatArray, FloatArray]:
@@ -264,26 +295,29 @@ class PoseStep:
 
 def inv_small(a: FloatArray) -> FloatArray:
     """Inverse of a symmetric positive definite 1 x 1, 2 x 2 or 3 x 3 matrix by cofactors
-    (numpy's general inverse costs ~20 us of call overhead at this size)."""
+    (numpy's general inverse costs ~20 us of call overhead at this size), in Python floats
+    (an element read from an array costs more than the multiplication)."""
     n = a.shape[0]
     if n == 1:
-        return np.array([[1.0 / a[0, 0]]])
+        return np.array([[1.0 / float(a[0, 0])]])
     if n == 2:
-        det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-        two: FloatArray = np.array([[a[1, 1], -a[0, 1]], [-a[1, 0], a[0, 0]]]) / det
+        (a00, a01), (a10, a11) = a.tolist()
+        det = a00 * a11 - a01 * a10
+        two: FloatArray = np.array([[a11, -a01], [-a10, a00]]) / det
         return two
     if n == 3:
-        c = np.empty((3, 3))
-        c[0, 0] = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
-        c[0, 1] = a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]
-        c[0, 2] = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
-        c[1, 0] = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
-        c[1, 1] = a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]
-        c[1, 2] = a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]
-        c[2, 0] = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
-        c[2, 1] = a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
-        c[2, 2] = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-        det = a[0, 0] * c[0, 0] + a[0, 1] * c[1, 0] + a[0, 2] * c[2, 0]
+        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = a.tolist()
+        c00 = a11 * a22 - a12 * a21
+        c10 = a12 * a20 - a10 * a22
+        c20 = a10 * a21 - a11 * a20
+        det = a00 * c00 + a01 * c10 + a02 * c20
+        c = np.array(
+            [
+                [c00, a02 * a21 - a01 * a22, a01 * a12 - a02 * a11],
+                [c10, a00 * a22 - a02 * a20, a02 * a10 - a00 * a12],
+                [c20, a01 * a20 - a00 * a21, a00 * a11 - a01 * a10],
+            ]
+        )
         out: FloatArray = c / det
         return out
     return np.asarray(np.linalg.inv(a), dtype=np.float64)

@@ -36,6 +36,7 @@ threshold at a confidence of ``z_flag`` standard deviations (one-sided), with hy
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -176,15 +177,17 @@ class FaultDecider:
         rest = delta_b.copy()
         c = self._B
         cwc = np.einsum("ji,jl,li->i", c, w, c)
+        # what the greedy steps share: computed once
+        cwc_floor, cwc_root = np.maximum(cwc, 1e-300), np.sqrt(cwc)
+        need = np.where(keep_on, 0.5 * z, z)  # hysteresis: half the level to stay on
+        big_at = self.config.bias_min_rel * self._range
         for _ in range(self._m):
-            f = (c.T @ (w @ rest)) / np.maximum(cwc, 1e-300)
-            score = np.abs(f) * np.sqrt(cwc)
-            need = np.where(keep_on, 0.5 * z, z)  # hysteresis: half the level to stay on
-            big = np.abs(f) >= self.config.bias_min_rel * self._range
-            ok = (score > need) & big & ~on
+            f = (c.T @ (w @ rest)) / cwc_floor
+            score = np.abs(f) * cwc_root
+            ok = (score > need) & (np.abs(f) >= big_at) & ~on
             if True not in ok.tolist():
                 break
-            i = int(np.argmax(np.where(ok, score, -np.inf)))
+            i = _best(ok.tolist(), score.tolist())
             rest = rest - c[:, i] * f[i]
             on[i], f_all[i] = True, f[i]
             if dof == 0 or float(rest @ w @ rest) < limit:
@@ -193,3 +196,13 @@ class FaultDecider:
         # Nothing found, or what is left is not along any thruster (the environment or the
         # model changed): attribute nothing, the controller keeps it.
         self._bias_on, self._f = np.zeros(self._m, dtype=bool), np.zeros(self._m)
+
+
+def _best(ok: list[bool], score: list[float]) -> int:
+    """np.argmax(np.where(ok, score, -inf)) in Python floats: the first index of the largest
+    score among the ok ones (one at least)."""
+    best, index = -math.inf, 0
+    for i, (o, sc) in enumerate(zip(ok, score, strict=True)):
+        if o and sc > best:
+            best, index = sc, i
+    return index

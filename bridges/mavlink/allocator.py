@@ -2,8 +2,12 @@
 
 In (dispatch thread -> mailboxes; invalid input is counted in the mailbox and dropped):
 
-* ``ODOMETRY`` from the vessel (``telemetry_source`` ids) -> ``odometry: Mailbox[Odometry]``
-  (eta = [x, y, yaw(q)] in NED, nu = [vx, vy, yawspeed] in body FRD).
+* ``ODOMETRY`` from the vessel -> ``odometry: Mailbox[Odometry]`` (eta = [x, y, yaw(q)] in
+  NED, nu = [vx, vy, yawspeed] in body FRD), only with the vessel's ids
+  (``telemetry_source``) and from the vessel's inbox address (``telemetry_from``, default
+  the endpoint's ``relay``; no address: no MAVLink telemetry). Anything else is counted in
+  ``stats.ignored`` (wrong ids) or ``stats.wrong_source`` (wrong address): a process that
+  claims the vessel's ids from another UDP port is not the vessel.
 * ``WRENCH_SETPOINT`` -> ``setpoint: Mailbox[WrenchSetpoint]``; a component beyond
   ``wrench_limit`` counts as malformed.
 * ``MANUAL_CONTROL`` -> ``manual: Mailbox[WrenchSetpoint]``, tau = [x, y, r] / 1000 *
@@ -97,6 +101,8 @@ class AllocatorLinkConfig:
         (default 10 x max_wrench: a sanity bound, not the vessel's capability, since the
         allocator itself reports what it cannot meet).
     telemetry_source: (system, component) ODOMETRY is accepted from; None accepts any.
+    telemetry_from: ``host:port`` inboxes ODOMETRY is accepted from (None: the endpoint's
+        ``relay``, the vessel's inbox; empty: none).
     u_max: per-thruster force (N) that an ACTUATOR_OUTPUT_STATUS output of 1 stands for
         (the vessel file's u_max); None: ACTUATOR_OUTPUT_STATUS is not sent.
     """
@@ -106,6 +112,7 @@ class AllocatorLinkConfig:
     wrench_limit: tuple[float, float, float] | None = None
     telemetry_source: tuple[int, int] | None = VESSEL_IDS
     u_max: tuple[float, ...] | None = None
+    telemetry_from: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.n_thrusters, int) or not 1 <= self.n_thrusters <= MAX_THRUSTERS:
@@ -163,9 +170,10 @@ class MavlinkAllocatorLink(PortOwner):
         poll_s: float = 0.05,
         heartbeat_period_s: float = 1.0,
         limits: TrafficLimits | None = None,
+        odometry: Mailbox[Odometry] | None = None,
     ) -> None:
         self.config = config
-        self.odometry: Mailbox[Odometry] = Mailbox("mavlink.odometry")
+        self.odometry: Mailbox[Odometry] = odometry or Mailbox("mavlink.odometry")
         self.setpoint: Mailbox[WrenchSetpoint] = Mailbox("mavlink.wrench_setpoint")
         self.manual: Mailbox[WrenchSetpoint] = Mailbox("mavlink.manual_control")
         self.params = ParamServer(param_specs)
@@ -191,7 +199,22 @@ class MavlinkAllocatorLink(PortOwner):
         )
         self._param_service.attach(self._port)
         self.commands.attach(self._port)
+        inboxes = config.telemetry_from
+        try:
+            self._telemetry_from = frozenset(
+                self._port.resolve("telemetry_from", self._port.endpoint.relay)
+                if inboxes is None
+                else self._port.resolve("telemetry_from", inboxes)
+            )
+        except LinkConfigError:
+            self._port.shutdown()
+            raise
         self._active_mask = (1 << config.n_thrusters) - 1
+
+    @property
+    def telemetry_from(self) -> frozenset[tuple[str, int]]:
+        """The source addresses ODOMETRY is accepted from (empty: none)."""
+        return self._telemetry_from
 
     # --- dispatch thread ---
 
@@ -199,6 +222,9 @@ class MavlinkAllocatorLink(PortOwner):
         source = self.config.telemetry_source
         if source is not None and (msg.get_srcSystem(), msg.get_srcComponent()) != source:
             self._port.stats.ignored += 1
+            return
+        if self._port.source not in self._telemetry_from:
+            self._port.stats.wrong_source += 1
             return
         self.odometry.put(odometry_from_message(msg, self._port.dialect))
 

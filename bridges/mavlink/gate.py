@@ -50,6 +50,7 @@ class PortStats:
     replay: int = 0
     unknown_system: int = 0
     unauthorized: int = 0  # setpoints / parameters / commands from a non-authorized system
+    wrong_source: int = 0  # telemetry from an address that is not the vessel's inbox
     malformed: int = 0  # decoded but invalid, for handlers without a mailbox
     ignored: int = 0  # addressed to someone else, from an unexpected source, or our own echo
     relayed: int = 0

@@ -267,6 +267,18 @@ class MavlinkPort:
         self.stats.unauthorized += 1
         return False
 
+    def resolve(self, key: str, values: tuple[str, ...]) -> tuple[Address, ...]:
+        """``host:port`` strings as source addresses of this transport (a byte stream: its
+        one source); LinkConfigError naming ``key`` otherwise."""
+        resolved: tuple[Address, ...] = self._transport.resolve(key, values)
+        return resolved
+
+    @property
+    def source(self) -> Address | None:
+        """The (host, port) the message being dispatched came from (dispatch thread, inside
+        a handler; None elsewhere or on a byte stream's single source)."""
+        return self._requester
+
     def reply(self, build: Callable[[Any], None], cost: float = 1.0) -> bool:
         """:meth:`send` an answer, paid from the requester's reply budget (dispatch thread,
         inside a handler): a source that floods requests cannot make the port flood."""

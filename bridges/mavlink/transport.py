@@ -78,6 +78,12 @@ class UdpTransport:
             raise LinkConfigError(f"connection: cannot open {connection!r}: {e}") from e
         self.table = PeerTable(tuple(configured), tuple(relay_addrs), limits or TrafficLimits())
         self.send_errors = 0
+        self.family = family
+
+    def resolve(self, key: str, values: Sequence[str]) -> tuple[Address, ...]:
+        """``host:port`` strings as the addresses datagrams from them carry (this socket's
+        family); LinkConfigError naming ``key`` if one does not parse or resolve."""
+        return tuple(_resolve(key, *parse_host_port(key, v), self.family)[1] for v in values)
 
     @property
     def local_address(self) -> Address:
@@ -136,6 +142,10 @@ class StreamTransport:
             self.conn.write(buf)
         except OSError:
             self.send_errors += 1
+
+    def resolve(self, key: str, values: Sequence[str]) -> tuple[Address, ...]:
+        """A stream has one source, whatever ``values`` say."""
+        return (STREAM_SOURCE,)
 
     def send_to(self, buf: bytes | bytearray, addr: Address) -> bool:
         """Streams have one far end: ``addr`` is ignored."""

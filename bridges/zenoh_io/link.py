@@ -71,6 +71,7 @@ from bridges.zenoh_io.session import (
     ZenohLink,
     ZenohLinkError,
     apply_overrides,
+    authenticates,
     load_config,
     make_config,
     validate_config,
@@ -87,6 +88,7 @@ __all__ = [
     "ZenohLinkError",
     "ZenohVesselLink",
     "apply_overrides",
+    "authenticates",
     "load_config",
     "make_config",
     "validate_config",
@@ -117,11 +119,13 @@ class ZenohAllocatorLink(ZenohLink):
         odometry: Mailbox[Odometry] | None = None,
         wrench_limit: tuple[float, float, float] | None = None,
         ros2: Ros2Settings | None = None,
+        ros2_odometry: Mailbox[Odometry] | None = None,
     ) -> None:
         self.wrench_limit = _check_limit(wrench_limit)
         super().__init__(vessel, config)
         self.setpoints = setpoints if setpoints is not None else Mailbox("setpoint")
         self.odometry = odometry if odometry is not None else Mailbox("odometry")
+        self.ros2_odometry = ros2_odometry or Mailbox[Odometry]("ros2.odometry")
         self.queries_answered = 0
         self._snapshot: bytes | None = None
         k = self.keys
@@ -132,7 +136,6 @@ class ZenohAllocatorLink(ZenohLink):
         self._declare_publisher(k.status)
         self._entities.append(self._session.declare_queryable(k.state, self._answer_state))
         self.ros2_setpoints: Mailbox[WrenchSetpoint] = Mailbox("ros2.setpoint")
-        self.ros2_odometry: Mailbox[Odometry] = Mailbox("ros2.odometry")
         self.modes = EventQueue[Mode]("ros2.mode")  # for the loop: daemon.set_mode
         self._ros2: dict[str, Ros2Publisher] = {} if ros2 is None else self._declare_ros2(ros2)
 

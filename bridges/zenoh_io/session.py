@@ -116,6 +116,15 @@ def _defaults() -> dict[str, Any]:
     return defaults if isinstance(defaults, dict) else {}
 
 
+def authenticates(conf: zenoh.Config) -> bool:
+    """The session admits peers by identity: access control on, default deny (the TLS
+    configs: only the vessel's certificate may put odometry). Without it any process that
+    reaches the router may publish on any key."""
+    enabled = _get_json(conf, "access_control/enabled")
+    default = _get_json(conf, "access_control/default_permission")
+    return enabled is True and default == "deny"
+
+
 def _get_json(conf: zenoh.Config, key: str) -> Any:
     try:
         return json.loads(conf.get_json(key))

@@ -23,6 +23,7 @@ from ftcap_hil.core.messages import EscStatus
 from ftcap_hil.core.status import AllocatorStatus, Severity
 from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
 from ftcap_hil.runtime.daemon import Ports
+from ftcap_hil.runtime.telemetry_guard import OdometryMailbox
 
 
 class AllocatorSettings(Protocol):
@@ -141,6 +142,7 @@ def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Por
     from bridges.mavlink.status import MavlinkStatusSink
 
     d = cfg.daemon
+    odometry = OdometryMailbox("mavlink.odometry")
     link = stack.enter_context(
         mav.MavlinkAllocatorLink(
             mav.AllocatorLinkConfig(
@@ -148,6 +150,7 @@ def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Por
                 mav_cfg.max_wrench,
                 mav_cfg.wrench_limit,
                 u_max=tuple(float(v) for v in d.thrusters.u_max),
+                telemetry_from=mav_cfg.telemetry_from,
             ),
             mav_cfg.endpoint,
             allocator_param_specs(
@@ -158,10 +161,11 @@ def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Por
                 d.rate_hz,
                 float(np.max(d.thrusters.u_max)),
             ),
+            odometry=odometry,
         )
     )
     ports.setpoints += [link.setpoint, link.manual]
-    ports.telemetry.append(link.odometry)
+    ports.telemetry.append(link.odometry)  # trusted: the vessel's inbox address only
     ports.status.append(MavlinkStatusSink(link))
     return AllocatorTunables(link.params)
 
@@ -181,13 +185,21 @@ def open_zenoh(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports
     ros2 = Ros2Settings(z_cfg.domain_id, z_cfg.namespace) if z_cfg.ros2 else None
     zl = stack.enter_context(
         zenoh_link.ZenohAllocatorLink(
-            z_cfg.vessel, conf, wrench_limit=z_cfg.wrench_limit, ros2=ros2
+            z_cfg.vessel,
+            conf,
+            wrench_limit=z_cfg.wrench_limit,
+            ros2=ros2,
+            odometry=OdometryMailbox("zenoh.odometry"),
+            ros2_odometry=OdometryMailbox("ros2.odometry"),
         )
     )
+    # Without access control any local process may put odometry: untrusted, used only
+    # while no trusted port is fresh (runtime.telemetry_guard).
+    telemetry = ports.telemetry if zenoh_link.authenticates(conf) else ports.untrusted_telemetry
     ports.setpoints.append(zl.setpoints)
-    ports.telemetry.append(zl.odometry)
+    telemetry.append(zl.odometry)
     if ros2 is not None:  # its own mailboxes: the vessel sends its odometry both ways
         ports.setpoints.append(zl.ros2_setpoints)
-        ports.telemetry.append(zl.ros2_odometry)
+        telemetry.append(zl.ros2_odometry)
         ports.modes.append(zl.modes)
     ports.status.append(ZenohStatusSink(zl))

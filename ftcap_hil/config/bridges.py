@@ -73,12 +73,15 @@ class CanSettings:
 @dataclass(frozen=True)
 class MavlinkSettings:
     """``[mavlink]`` of an enabled link: where it binds and whom it sends to; for the
-    allocator also ``max_wrench`` (MANUAL_CONTROL full deflection [X N, Y N, N N*m]) and
-    ``wrench_limit`` (WRENCH_SETPOINT components beyond are dropped as malformed)."""
+    allocator also ``max_wrench`` (MANUAL_CONTROL full deflection [X N, Y N, N N*m]),
+    ``wrench_limit`` (WRENCH_SETPOINT components beyond are dropped as malformed) and
+    ``telemetry_from`` (the ``host:port`` inboxes ODOMETRY is accepted from; None: the
+    ``relay`` inboxes, i.e. the vessel's)."""
 
     endpoint: MavlinkEndpoint
     max_wrench: tuple[float, float, float] = (0.3, 0.3, 0.06)
     wrench_limit: tuple[float, float, float] | None = None
+    telemetry_from: tuple[str, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -142,11 +145,16 @@ def mavlink_endpoint_from(t: Table, default: MavlinkEndpoint) -> MavlinkEndpoint
 
 
 def _mavlink(t: Table, allocator: bool) -> MavlinkSettings | None:
-    from bridges.mavlink.config import default_allocator_endpoint, default_vessel_endpoint
+    from bridges.mavlink.config import (
+        default_allocator_endpoint,
+        default_vessel_endpoint,
+        parse_host_port,
+    )
+    from bridges.mavlink.errors import LinkConfigError
 
     if not t.boolean("enabled", True):
         t.allow(*ENDPOINT_KEYS)
-        t.allow(*(("max_wrench", "wrench_limit") if allocator else ()))
+        t.allow(*(("max_wrench", "wrench_limit", "telemetry_from") if allocator else ()))
         return None
     if not allocator:
         return MavlinkSettings(mavlink_endpoint_from(t, default_vessel_endpoint()))
@@ -157,7 +165,14 @@ def _mavlink(t: Table, allocator: bool) -> MavlinkSettings | None:
     limit = t.vector("wrench_limit", 3, positive=True) if t.has("wrench_limit") else None
     t.allow("wrench_limit")
     triple = None if limit is None else (float(limit[0]), float(limit[1]), float(limit[2]))
-    return MavlinkSettings(endpoint, (float(mx), float(my), float(mn)), triple)
+    sources = t.strings("telemetry_from") if t.has("telemetry_from") else None
+    t.allow("telemetry_from")
+    for text in sources or ():
+        try:
+            parse_host_port("telemetry_from", text)
+        except LinkConfigError as e:
+            raise t.error(None, str(e)) from e
+    return MavlinkSettings(endpoint, (float(mx), float(my), float(mn)), triple, sources)
 
 
 def zenoh_config_path(t: Table, default: str) -> Path:

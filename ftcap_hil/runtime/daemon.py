@@ -7,7 +7,8 @@ reads the latest values with their ages. A cycle runs at every deadline of the f
 work, not up to a period; the deadlines keep their phase). Each cycle:
 
     queued calls, mode requests and hooks (parameters) -> setpoint (+ age) -> watchdogs
-    -> estimation sample from telemetry -> core.step -> thruster command -> transitions
+    -> estimation sample from telemetry (the sources' guard, the plausibility gate)
+    -> core.step -> thruster command -> transitions
     -> status
 
 Watchdogs: no setpoint for ``setpoint_timeout_s`` -> zero thrust; telemetry older than
@@ -41,7 +42,7 @@ from ftcap_hil.ports.mailbox import EventQueue, Mailbox
 from ftcap_hil.ports.transitions import TransitionLog, log_to
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.esc_watchdog import EscStallMonitor, EscWatchdog
-from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
+from ftcap_hil.runtime.estimation import EstimationSampler
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
 from ftcap_hil.runtime.signals import capture_signals
@@ -53,6 +54,7 @@ from ftcap_hil.runtime.status_report import (
     announce_cycle,
     assemble_status,
 )
+from ftcap_hil.runtime.telemetry_guard import TelemetryGuard, TelemetryIntake, TelemetryPort
 
 log = logging.getLogger(__name__)
 _log_announce = log_to(log)
@@ -81,7 +83,9 @@ class StatusSink(Protocol):
 @dataclass
 class Ports:
     """The daemon's ports. Several setpoint mailboxes: the latest received wins; several
-    telemetry mailboxes: the newest measurement wins."""
+    telemetry mailboxes: the newest measurement wins. ``telemetry`` holds the ports whose
+    transport authenticates the vessel, ``untrusted_telemetry`` the others, used only while
+    no trusted one is fresh (:mod:`~ftcap_hil.runtime.telemetry_guard`)."""
 
     setpoints: list[Mailbox[WrenchSetpoint]]
     telemetry: list[Mailbox[Odometry]]
@@ -90,10 +94,12 @@ class Ports:
     esc_ages: Callable[[int], FloatArray] | None = None  # now_ns -> (m,) seconds
     esc_latest: Callable[[], Sequence[EscStatus | None]] | None = None  # per thruster
     modes: list[EventQueue[Mode]] = field(default_factory=list)  # mode requests (ROS 2 topic)
+    untrusted_telemetry: list[Mailbox[Odometry]] = field(default_factory=list)
 
     def malformed(self) -> int:
         """Malformed inputs dropped so far on every setpoint and telemetry port."""
-        return sum(b.malformed for b in self.setpoints) + sum(b.malformed for b in self.telemetry)
+        boxes: list[Mailbox[Any]] = [*self.setpoints, *self.telemetry, *self.untrusted_telemetry]
+        return sum(b.malformed for b in boxes)
 
 
 def _latest(boxes: Sequence[Mailbox[Any]]) -> tuple[Any, int]:
@@ -136,6 +142,16 @@ class AllocatorDaemon:
         )
         self.sampler = EstimationSampler(
             config.estimation_period_s, config.vessel_clock, config.odometry_limits
+        )
+        self.telemetry = TelemetryIntake(
+            TelemetryGuard(
+                [TelemetryPort(b, True) for b in ports.telemetry]
+                + [TelemetryPort(b, False) for b in ports.untrusted_telemetry],
+                config.odometry_limits,
+            ),
+            self.sampler,
+            self.transitions,
+            config.telemetry_timeout_s,
         )
         self.calls = PendingCalls(self.loop.wake)
         self.latency = LatencyStats()
@@ -218,16 +234,8 @@ class AllocatorDaemon:
         self.cycles += 1
         elapsed_s = self._elapsed_s(now)
         setpoint, sp_stamp = _latest(self.ports.setpoints)
-        odom, tel_stamp = self._telemetry()
-        fresh = self._freshness(now, sp_stamp, tel_stamp)
-        sample = None if fresh.telemetry_stale else self.sampler.sample(odom, tel_stamp)
-        gate = self.sampler.gate
-        self.transitions.update(
-            "telemetry_implausible",
-            gate.reason is not None,
-            f"telemetry implausible ({gate.reason}): dropped, estimation paused",
-            "telemetry plausible again: estimation resumes",
-        )
+        fresh = self._freshness(now, sp_stamp, self.telemetry.newest_stamp())
+        sample = self.telemetry.sample(now, fresh.telemetry_stale)
         result = None
         self._restart_after_lapse()
         if fresh.setpoint_stale:
@@ -283,13 +291,6 @@ class AllocatorDaemon:
             "thruster commands reach the ESCs again",
         ):
             self.lapses += lapsed
-
-    def _telemetry(self) -> tuple[Odometry | None, int]:
-        """The newest odometry over the telemetry ports (by vessel time, not by receipt:
-        :func:`~ftcap_hil.runtime.estimation.newest_odometry`) and its receipt stamp."""
-        window_ns = int(self.config.telemetry_timeout_s * 1e9)
-        slot = newest_odometry([box.latest() for box in self.ports.telemetry], window_ns)
-        return (None, -1) if slot is None else (slot.value, slot.stamp_ns)
 
     def _elapsed_s(self, now: int) -> float | None:
         """Seconds since the last cycle, clamped to ``dt_clamp`` periods (None: first)."""

@@ -109,30 +109,53 @@ class VesselClock:
         return mapped if receipt_ns - mapped <= self._max_shift_ns else receipt_ns
 
 
+def track_jump(
+    limits: OdometryLimits, prev: tuple[Odometry, int], odom: Odometry, receipt_ns: int
+) -> str | None:
+    """Why ``odom`` (received at ``receipt_ns``) cannot follow ``prev`` (a sample and its
+    receipt stamp) on one vessel's track, or None if it can: a position that moved more
+    than ``max_speed dt + position_margin`` or a velocity that changed more than
+    ``max_accel dt + velocity_margin``, ``dt`` on the vessel's clock when it runs forward
+    between them, else the receipt stamps (either order)."""
+    p_odom, p_receipt = prev
+    dt = odom.time_s - p_odom.time_s
+    if not math.isfinite(dt) or dt < 0:
+        dt = abs(receipt_ns - p_receipt) * 1e-9
+    moved = math.hypot(odom.eta[0] - p_odom.eta[0], odom.eta[1] - p_odom.eta[1])
+    if moved > limits.max_speed_m_s * dt + limits.position_margin_m:
+        return f"position jumped {moved:.3g} m in {dt:.3g} s"
+    dv = math.hypot(odom.nu[0] - p_odom.nu[0], odom.nu[1] - p_odom.nu[1])
+    if dv > limits.max_accel_m_s2 * dt + limits.velocity_margin_m_s:
+        return f"velocity jumped {dv:.3g} m/s in {dt:.3g} s"
+    return None
+
+
 class PlausibilityGate:
     """Drops odometry the vessel cannot have produced, before it reaches the estimator.
 
-    Implausible: a non-finite value; a speed or yaw rate beyond the limits; a position that
-    moved more than ``max_speed dt + position_margin`` or a velocity that changed more than
-    ``max_accel dt + velocity_margin`` since the last kept sample (``dt`` on the vessel's
-    clock, else the receipt stamps). A forged sample among the vessel's own costs only
-    itself. A genuine jump (a GNSS re-fix) costs one sample: a sample that jumps from the
-    last kept one but follows on from the dropped one before it is kept (two samples agree
-    on the new track), so the gate cannot lock itself out.
+    Implausible: a non-finite value; a speed or yaw rate beyond the limits; a sample that
+    cannot follow the last kept one (:func:`track_jump`). A forged sample among the
+    vessel's own costs only itself. A genuine jump (a GNSS re-fix) starts a new track that
+    is kept once it has followed on from itself for ``refix_s`` with no sample of the old
+    track in between; until then its samples are dropped (estimation paused, announced).
+    So the gate cannot lock itself out, and a forged track that takes turns with the
+    vessel's never becomes the estimator's.
     """
 
-    def __init__(self, limits: OdometryLimits | None = None) -> None:
+    def __init__(self, limits: OdometryLimits | None = None, refix_s: float = 2.0) -> None:
         self.limits = limits or OdometryLimits()
+        self.refix_ns = int(refix_s * 1e9)
         self.rejected = 0
         self.reason: str | None = None  # why the last sample was dropped; None: it was kept
         self._kept: tuple[Odometry, int] | None = None
-        self._dropped: tuple[Odometry, int] | None = None  # the last one, if it was dropped
+        self._pending: tuple[Odometry, int] | None = None  # the new track's latest sample
+        self._pending_since = 0  # receipt stamp of the new track's first sample
 
     def check(self, odom: Odometry, receipt_ns: int) -> bool:
         """True when ``odom`` is plausible (counted and ``reason`` set otherwise)."""
         self.reason = self._why(odom, receipt_ns)
         if self.reason is None:
-            self._kept, self._dropped = (odom, receipt_ns), None
+            self._kept, self._pending = (odom, receipt_ns), None
         else:
             self.rejected += 1
         return self.reason is None
@@ -144,33 +167,21 @@ class PlausibilityGate:
             return "non-finite pose or velocity"
         speed = math.hypot(nu[0], nu[1])
         if speed > lim.max_speed_m_s:
-            self._dropped = None
             return f"speed {speed:.3g} m/s > {lim.max_speed_m_s:g}"
         if abs(nu[2]) > lim.max_yaw_rate_rad_s:
-            self._dropped = None
             return f"yaw rate {nu[2]:.3g} rad/s beyond {lim.max_yaw_rate_rad_s:g}"
         if self._kept is None:
             return None
-        jump = self._jump(self._kept, odom, receipt_ns)
+        jump = track_jump(lim, self._kept, odom, receipt_ns)
         if jump is None:
             return None
-        dropped, self._dropped = self._dropped, (odom, receipt_ns)
-        if dropped is not None and self._jump(dropped, odom, receipt_ns) is None:
-            return None  # follows on from the sample before: the vessel's track moved
-        return jump
-
-    def _jump(self, prev: tuple[Odometry, int], odom: Odometry, receipt_ns: int) -> str | None:
-        lim, (p_odom, p_receipt) = self.limits, prev
-        dt = odom.time_s - p_odom.time_s
-        if not math.isfinite(dt) or dt < 0:
-            dt = max((receipt_ns - p_receipt) * 1e-9, 0.0)
-        moved = math.hypot(odom.eta[0] - p_odom.eta[0], odom.eta[1] - p_odom.eta[1])
-        if moved > lim.max_speed_m_s * dt + lim.position_margin_m:
-            return f"position jumped {moved:.3g} m in {dt:.3g} s"
-        dv = math.hypot(odom.nu[0] - p_odom.nu[0], odom.nu[1] - p_odom.nu[1])
-        if dv > lim.max_accel_m_s2 * dt + lim.velocity_margin_m_s:
-            return f"velocity jumped {dv:.3g} m/s in {dt:.3g} s"
-        return None
+        pending, self._pending = self._pending, (odom, receipt_ns)
+        if pending is None or track_jump(lim, pending, odom, receipt_ns) is not None:
+            self._pending_since = receipt_ns  # a new track starts here
+        elif receipt_ns - self._pending_since >= self.refix_ns:
+            return None  # the new track held on its own: the vessel's track moved
+        held = (receipt_ns - self._pending_since) * 1e-9
+        return f"{jump}; a new track for {held:.1f} s"
 
 
 class EstimationSample(NamedTuple):

@@ -44,8 +44,8 @@ def _params() -> list[ParamSpec]:
 
 @pytest.fixture
 def pair() -> Iterator[tuple[MavlinkAllocatorLink, RawPeer, int]]:
-    link_port, gcs_port = free_udp_ports(2)
-    endpoint = MavlinkEndpoint.inbox(link_port, ALLOCATOR_IDS, (gcs_port,))
+    link_port, gcs_port, vessel_port = free_udp_ports(3)
+    endpoint = MavlinkEndpoint.inbox(link_port, ALLOCATOR_IDS, (gcs_port,), relay=(vessel_port,))
     config = AllocatorLinkConfig(n_thrusters=4, max_wrench=MAX_WRENCH)
     # The GCS end binds and waits: it can only answer once the link has sent to it.
     with RawPeer(f"udpin:127.0.0.1:{gcs_port}") as gcs:
@@ -54,8 +54,12 @@ def pair() -> Iterator[tuple[MavlinkAllocatorLink, RawPeer, int]]:
             yield link, gcs, link_port
 
 
-def _vessel_peer(link_port: int) -> RawPeer:
-    return RawPeer(f"udpout:127.0.0.1:{link_port}", VESSEL_IDS)
+def _vessel_peer(link: MavlinkAllocatorLink, link_port: int) -> RawPeer:
+    """The vessel, sending from its inbox (the link's one telemetry address)."""
+    (inbox,) = link.telemetry_from
+    peer = RawPeer(f"udpout:127.0.0.1:{link_port}", VESSEL_IDS)
+    peer.conn.port.bind(inbox)
+    return peer
 
 
 def test_heartbeat_identifies_allocator_and_follows_status(pair) -> None:
@@ -155,7 +159,7 @@ def test_manual_control_invalid_axis_is_zero_and_out_of_range_is_dropped(pair) -
 def test_odometry_from_the_vessel_gives_eta_and_nu(pair) -> None:
     link, _, link_port = pair
     psi = 2.9  # near +pi: atan2 branch matters
-    with _vessel_peer(link_port) as vessel:
+    with _vessel_peer(link, link_port) as vessel:
         vessel.mav.odometry_send(
             3_500_000, DIALECT.MAV_FRAME_LOCAL_NED, DIALECT.MAV_FRAME_BODY_FRD,
             10.0, -4.0, 0.0, quaternion_from_yaw(psi), 1.5, -0.2, 0.0, 0.0, 0.0, 0.05,
@@ -173,7 +177,7 @@ def test_odometry_in_wrong_frame_or_bad_quaternion_or_wrong_source_is_dropped(pa
     nan21 = [math.nan] * 21
     ned, frd = DIALECT.MAV_FRAME_LOCAL_NED, DIALECT.MAV_FRAME_BODY_FRD
     with (
-        _vessel_peer(link_port) as vessel,
+        _vessel_peer(link, link_port) as vessel,
         RawPeer(f"udpout:127.0.0.1:{link_port}", (7, 1)) as other,
     ):
         args = (0.0, 0.0, 0.0, [1, 0, 0, 0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -184,6 +188,23 @@ def test_odometry_in_wrong_frame_or_bad_quaternion_or_wrong_source_is_dropped(pa
         other.mav.odometry_send(1, ned, frd, *args, nan21, nan21)  # system 7: refused at once
         assert wait_until(lambda: link.odometry.malformed == 3 and link.stats.unknown_system >= 1)
     assert link.odometry.latest() is None
+
+
+def test_odometry_claiming_the_vessel_ids_from_another_port_is_refused(pair) -> None:
+    """Issue 22, item 1: a forger that claims system 1 component 1 from any UDP port but the
+    vessel's inbox is not the vessel; its ODOMETRY never reaches the mailbox."""
+    link, _, link_port = pair
+    nan21 = [math.nan] * 21
+    ned, frd = DIALECT.MAV_FRAME_LOCAL_NED, DIALECT.MAV_FRAME_BODY_FRD
+    args = (5.0, 0.0, 0.0, [1, 0, 0, 0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    with RawPeer(f"udpout:127.0.0.1:{link_port}", VESSEL_IDS) as forger:
+        for k in range(50):
+            forger.mav.odometry_send(k, ned, frd, *args, nan21, nan21)
+        assert wait_until(lambda: link.stats.wrong_source == 50)
+    assert link.odometry.latest() is None and link.odometry.received == 0
+    with _vessel_peer(link, link_port) as vessel:  # the vessel itself still gets through
+        vessel.mav.odometry_send(1, ned, frd, *args, nan21, nan21)
+        assert wait_until(lambda: link.odometry.received == 1)
 
 
 def _param_values(gcs: RawPeer, since: int) -> dict[str, tuple[float, int, int, int]]:

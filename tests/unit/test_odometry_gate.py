@@ -1,5 +1,6 @@
 """Odometry the vessel cannot have produced is dropped and counted before the estimator
-(runtime/estimation.py, PlausibilityGate); a genuine jump costs one sample, never a lock-out."""
+(runtime/estimation.py, PlausibilityGate); a genuine jump costs the re-fix time, never a
+lock-out; a forged track that takes turns with the vessel's is never kept (issue 22)."""
 
 from __future__ import annotations
 
@@ -42,13 +43,30 @@ def test_each_kind_of_implausible_sample_is_dropped_and_named(bad: Odometry, why
     assert gate.reason is not None and why in gate.reason and gate.rejected == 1
 
 
-def test_a_genuine_jump_costs_one_sample_then_the_gate_follows() -> None:
-    gate = PlausibilityGate(OdometryLimits(position_margin_m=1.0))
+def test_a_genuine_jump_is_kept_once_it_held_for_the_refix_time() -> None:
+    gate = PlausibilityGate(OdometryLimits(position_margin_m=1.0), refix_s=2.0)
     for k in range(5):
         assert gate.check(odo(k), ns(k))
-    refix = [odo(k, north=0.5 * k * DT + 10.0) for k in range(5, 10)]  # 10 m re-fix
-    kept = [gate.check(o, ns(k)) for k, o in zip(range(5, 10), refix, strict=True)]
-    assert kept == [False, True, True, True, True]
+    # 100 m: beyond what 15 m/s covers in the 2 s (a smaller jump becomes reachable sooner)
+    refix = [odo(k, north=0.5 * k * DT + 100.0) for k in range(5, 40)]
+    kept = [gate.check(o, ns(k)) for k, o in zip(range(5, 40), refix, strict=True)]
+    # 2 s of the new track at 10 Hz: samples 5..24 dropped, 25 on kept
+    assert kept == [False] * 20 + [True] * 15
+    assert gate.reason is None and gate.rejected == 20
+
+
+def test_a_forged_track_taking_turns_with_the_vessels_is_never_kept() -> None:
+    """The old rule kept a sample that followed on from the dropped one before it: a steady
+    forger (bursts between the vessel's samples, standing still 50 m away) won whenever two
+    came in a row."""
+    gate = PlausibilityGate(OdometryLimits(position_margin_m=1.0), refix_s=2.0)
+    forged = lambda k: Odometry(np.array([50.0, 0, 0]), np.zeros(3), k * DT)  # noqa: E731
+    kept_forged = 0
+    for k in range(200):
+        assert gate.check(odo(k), ns(k))
+        for _ in range(3 if k % 4 else 1):  # bursts of three forged samples
+            kept_forged += gate.check(forged(k), ns(k))
+    assert kept_forged == 0
 
 
 def test_absurd_samples_never_reach_the_estimator_and_sampling_goes_on() -> None:

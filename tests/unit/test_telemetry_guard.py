@@ -1,0 +1,69 @@
+"""The telemetry sources' guard (runtime/telemetry_guard.py, issue 22 item 1): a trusted port
+wins over an untrusted one, two senders on one port or two ports that disagree are an alarm,
+and estimation freezes only when the alarm concerns the source in use."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ftcap_hil.core.messages import Odometry
+from ftcap_hil.ports.mailbox import Mailbox
+from ftcap_hil.runtime.telemetry_guard import OdometryMailbox, TelemetryGuard, TelemetryPort
+
+S = 1_000_000_000
+
+
+def odo(t: float, north: float = 0.0) -> Odometry:
+    return Odometry(np.array([north, 0.0, 0.0]), np.zeros(3), t)
+
+
+def test_the_trusted_port_is_used_and_an_untrusted_forger_only_raises_the_alarm() -> None:
+    mav, zen = OdometryMailbox("mavlink.odometry"), OdometryMailbox("zenoh.odometry")
+    guard = TelemetryGuard([TelemetryPort(mav, True), TelemetryPort(zen, False)])
+    mav.put(odo(1.0), 10 * S)
+    zen.put(odo(99.0, north=40.0), 10 * S + 1000)  # newer vessel time, 40 m away
+    got = guard.choose(10 * S + 2000, S)
+    assert got.sample is not None and got.sample.value.eta[0] == 0.0
+    assert got.alarm is not None and "disagree" in got.alarm and not got.frozen
+
+
+def test_an_untrusted_port_alone_is_used_and_said_so() -> None:
+    mav, zen = OdometryMailbox("mavlink.odometry"), OdometryMailbox("zenoh.odometry")
+    guard = TelemetryGuard([TelemetryPort(mav, True), TelemetryPort(zen, False)])
+    zen.put(odo(1.0), 10 * S)
+    got = guard.choose(10 * S, S)
+    assert got.sample is not None and got.untrusted_only and got.alarm is None
+
+
+def test_two_senders_on_the_port_in_use_freeze_estimation_for_the_hold_time() -> None:
+    zen = OdometryMailbox("zenoh.odometry")
+    guard = TelemetryGuard([TelemetryPort(zen, False)], hold_s=2.0)
+    for k in range(10):  # the vessel at 0.1 k s, a forger at 100 + k s, interleaved
+        zen.put(odo(0.1 * k), 10 * S + k * 100_000_000)
+        zen.put(odo(100.0 + k), 10 * S + k * 100_000_000 + 1000)
+    got = guard.choose(11 * S, S)
+    assert got.frozen and got.sample is None
+    assert got.alarm is not None and "two odometry senders" in got.alarm
+    zen.put(odo(200.0), 18 * S)  # the forger gone for longer than the window and the hold
+    later = guard.choose(18 * S, S)
+    assert not later.frozen and later.sample is not None and later.alarm is None
+
+
+def test_one_restart_is_not_a_second_sender() -> None:
+    box = OdometryMailbox("zenoh.odometry")
+    guard = TelemetryGuard([TelemetryPort(box, True)])
+    for t in (5.0, 5.1, 0.0, 0.1, 0.2):  # vessel time goes back once
+        box.put(odo(t), 10 * S)
+    got = guard.choose(10 * S, S)
+    assert got.alarm is None and got.sample is not None
+
+
+def test_plain_mailboxes_are_judged_on_agreement_only() -> None:
+    a, b = Mailbox[Odometry]("a"), Mailbox[Odometry]("b")
+    guard = TelemetryGuard([TelemetryPort(a, True), TelemetryPort(b, True)])
+    a.put(odo(1.0), 10 * S)
+    b.put(odo(1.0, north=0.5), 10 * S)  # within the 2 m margin
+    assert guard.choose(10 * S, S).alarm is None
+    b.put(odo(1.0, north=30.0), 10 * S)
+    got = guard.choose(10 * S, S)
+    assert got.alarm is not None and got.frozen  # both trusted: nothing to prefer

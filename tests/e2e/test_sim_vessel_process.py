@@ -204,7 +204,10 @@ def _check_record(sim: SimProcess) -> None:
     times = [float(r["time_s"]) for r in rows]
     assert all(b > a for a, b in zip(times, times[1:], strict=False))
     driven = [r for r in rows if r["command_fresh"] == "1" and float(r["u_T1_N"]) == 0.1]
-    assert driven and float(driven[0]["tau_X_N"]) == pytest.approx(0.4 / math.sqrt(2))
+    # The step in which the command arrived applies it from its receive stamp only (the row's
+    # tau is the step's mean: 0.209 N of 0.283 in one loaded CI run); the next is all of it.
+    assert len(driven) > 1 and float(driven[1]["tau_X_N"]) == pytest.approx(0.4 / math.sqrt(2))
+    assert 0.0 < float(driven[0]["tau_X_N"]) <= 0.4 / math.sqrt(2) + 1e-9
     last = rows[-1]
     assert (float(last["delta_T1"]), float(last["f_T1_N"])) == (0.0, 0.0)
     assert (float(last["delta_T2"]), float(last["f_T2_N"])) == (1.0, 0.02)

@@ -87,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
         "description": spec.description,
         "ran": len(written),
         "wall_s": wall,
+        "tuning_seeds": list(spec.tuning_seeds),
         "scheduler": args.scheduler
         or f"an embedded LocalCluster ({args.workers or 'one per core'} workers)",
     }

@@ -143,6 +143,7 @@ class CampaignSpec:
     duration_s: float | None
     metrics: MetricParams
     base: Path | None  # folder relative scenario paths resolve against
+    tuning_seeds: tuple[int, ...] = ()  # where the thresholds were calibrated: not evaluated
 
 
 def _range(t: Table, key: str, default: Range | None) -> Range | None:
@@ -265,11 +266,12 @@ def campaign_from(root: Table, base: Path | None = None) -> CampaignSpec:
         raise root.error("scenario", f"duplicate labels in {labels} (set label = ...)")
     healthy = _healthy(root.table("healthy"), labels) if root.has("healthy") else None
     root.allow("healthy")
+    seeds = _seeds(head)
     return CampaignSpec(
         name=head.string("name"),
         description=head.string("description", ""),
         source=root.file,
-        seeds=_seeds(head),
+        seeds=seeds,
         variants=_variants(head, root),
         scenarios=scenarios,
         faults=_faults(root.table("faults")),
@@ -277,7 +279,25 @@ def campaign_from(root: Table, base: Path | None = None) -> CampaignSpec:
         duration_s=head.number("duration", None, positive=True),
         metrics=read_dataclass(root.table("metrics"), MetricParams),
         base=base,
+        tuning_seeds=_tuning_seeds(head, seeds + (healthy.seeds if healthy else ())),
     )
+
+
+def _tuning_seeds(head: Table, evaluated: tuple[int, ...]) -> tuple[int, ...]:
+    """``[campaign] tuning_seeds``: the seeds the thresholds were calibrated on (for
+    example bench/calibrate_shaft.py's); none of them may be an evaluation seed."""
+    if not head.has("tuning_seeds"):
+        head.allow("tuning_seeds")
+        return ()
+    tuning = _distinct(head, "tuning_seeds", 0)
+    overlap = sorted(set(tuning) & set(evaluated))
+    if overlap:
+        raise head.error(
+            "tuning_seeds",
+            f"seeds {overlap} are also evaluated here: judge thresholds on other seeds "
+            "than the ones they were tuned on",
+        )
+    return tuning
 
 
 def parse_campaign(data: dict[str, Any], where: str, base: Path | None = None) -> CampaignSpec:

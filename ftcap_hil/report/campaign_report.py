@@ -158,6 +158,25 @@ def _harm_section(harm: list[Row], params: MetricParams) -> list[str]:
     ]
 
 
+def _seeds_text(rows: list[Row], tuning: list[int]) -> str:
+    seeds = sorted({int(r["seed"]) for r in rows if r.get("seed") is not None})
+    text = f" Evaluated on seeds {_compact(seeds)}" if seeds else ""
+    if tuning:
+        text += f"; thresholds tuned on seeds {_compact(sorted(tuning))} (disjoint)"
+    return text + "." if text else ""
+
+
+def _compact(seeds: list[int]) -> str:
+    """``[1, 2, 3, 7]`` -> ``1-3, 7``."""
+    parts, start = [], None
+    for i, s in enumerate(seeds):
+        start = s if start is None else start
+        if i + 1 == len(seeds) or seeds[i + 1] != s + 1:
+            parts.append(f"{start}" if start == s else f"{start}-{s}")
+            start = None
+    return ", ".join(parts)
+
+
 def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]) -> str:
     """The summary; ``info``: name, description, wall_s, workers, scheduler."""
     ok = [r for r in rows if r["status"] == "ok"]
@@ -171,7 +190,8 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         f"{len(rows)} runs ({len(ok)} ok, {len(rows) - len(ok)} failed) in "
         f"{len({r['case'] for r in rows})} cases; {hours:.2f} h simulated. "
         f"This invocation: {info.get('ran', 0)} runs in {info.get('wall_s', 0.0):.1f} s on "
-        f"{info.get('scheduler', 'an embedded LocalCluster')}.",
+        f"{info.get('scheduler', 'an embedded LocalCluster')}."
+        + _seeds_text(rows, info.get("tuning_seeds") or []),
         "",
         "Definitions of every column: docs/campaigns.md. Ratios: the run's deviation from its "
         "fault-free run (RMS over the run) over the oracle's / CAP's in the same case. "

@@ -130,11 +130,19 @@ def test_an_unknown_key_names_the_file_the_table_and_the_nearest_key(
         ({"metrics": {"harm_ratio": 0.9}}, "harm_ratio"),
         ({"variant": {"ftcap-prefilter": {"mode": "none"}}}, "mode"),
         ({"variant": {"cap": {"mode": "ftcap"}}}, "mode's name"),
+        ({"campaign": {"tuning_seeds": [4, 1001]}}, r"tuning_seeds: seeds \[4\] are also"),
+        ({"campaign": {"tuning_seeds": [0, 1001]}}, r"seeds \[0\] are also evaluated"),
     ],
 )
 def test_bad_values_are_config_errors(change: dict, needle: str) -> None:
     with pytest.raises(ConfigError, match=needle):
         parse_campaign(deep_merge(tomllib.loads(SMALL), change), "small.toml")
+
+
+def test_tuning_seeds_disjoint_from_the_evaluated_ones_are_kept() -> None:
+    doc = deep_merge(tomllib.loads(SMALL), {"campaign": {"tuning_seeds": [1001, 1002]}})
+    assert parse_campaign(doc, "small.toml").tuning_seeds == (1001, 1002)
+    assert parse_campaign(tomllib.loads(SMALL), "small.toml").tuning_seeds == ()
 
 
 def test_a_bad_scenario_override_fails_when_planning(tmp_path: Path) -> None:

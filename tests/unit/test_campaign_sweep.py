@@ -54,3 +54,13 @@ def test_the_report_links_the_tables_and_embeds_every_plot() -> None:
     images = [ln for ln in text.splitlines() if ln.startswith("![")]
     assert images == ["![sweep_map](sweep_map.png)", "![isolation_by_kind](isolation_by_kind.png)",
                       "![by_kind](by_kind.png)"]  # fmt: skip
+
+
+def test_the_summary_says_which_seeds_were_evaluated_and_which_tuned() -> None:
+    from ftcap_hil.report.campaign_report import _seeds_text
+
+    rows = [{"seed": s} for s in (3, 1, 2, 7, 2)]
+    assert _seeds_text(rows, [1001, 1002, 1003]) == (
+        " Evaluated on seeds 1-3, 7; thresholds tuned on seeds 1001-1003 (disjoint)."
+    )
+    assert _seeds_text(rows, []) == " Evaluated on seeds 1-3, 7."

@@ -121,7 +121,10 @@ class InboxGate:
                 self._stats.ignored += 1  # our own traffic echoed back by a forwarder
                 continue
             self._stats.received += 1
-            table.accepted(addr, now_ns, reply=system in self._authorized)
+            table.accepted(
+                addr, now_ns, reply=system in self._authorized,
+                identity=(system, msg.get_srcComponent()),
+            )  # fmt: skip
             self._relay(msg, addr)
             out.append(msg)
         return out

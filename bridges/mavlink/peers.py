@@ -16,6 +16,19 @@ never). A trusted source that speaks for an authorized (ground-station) system i
 **reply peer**: it receives everything the port sends, like the configured peers, up to
 ``max_dynamic_peers`` of them. :class:`PeerTable` hands the sender an immutable snapshot,
 so a send never iterates a table that the dispatch thread changes.
+
+Reply slots have a priority, so that a squatter costs only its own slot:
+
+* one slot per MAVLink identity (system, component): the address that claimed it first
+  keeps it while it talks; another address with the same identity gets no slot
+  (``identity_taken``), unless the holder has been silent for ``takeover_s`` (a restarted
+  ground station on a new port takes its identity back within seconds);
+* the first ground station admitted is **pinned**: never replaced while it talks;
+* a full table makes room only by dropping a peer silent for ``takeover_s`` (never the
+  pinned one); otherwise the newcomer is refused (``peers_full``).
+
+Without signing any local process may claim system 255: eight sockets with one identity
+now take one slot, eight identities still take eight; a key file is what authenticates.
 """
 
 from __future__ import annotations
@@ -43,6 +56,7 @@ class TrafficLimits:
     max_trusted: int = 32
     max_dynamic_peers: int = 8
     peer_timeout_s: float = 10.0
+    takeover_s: float = 3.0  # a reply peer silent this long may lose its slot (1 Hz beats)
 
 
 @dataclass
@@ -84,6 +98,7 @@ class Source:
     last_ns: int = 0
     reply: bool = False
     permanent: bool = False
+    identity: tuple[int, int] | None = None  # the (system, component) its slot is held for
 
 
 @dataclass
@@ -95,6 +110,8 @@ class TableStats:
     strangers_evicted: int = 0
     trusted_full: int = 0  # accepted frames whose source found no room in the trusted table
     peers_full: int = 0  # authorized sources that found no room among the reply peers
+    identity_taken: int = 0  # refused a slot: another address holds that identity
+    slots_freed: int = 0  # reply slots taken from a silent peer for a newcomer
     expired: int = 0
 
 
@@ -120,6 +137,8 @@ class PeerTable:
             self._trusted[addr] = self._new_source(permanent=True)
         self._lock = threading.Lock()
         self._snapshot: tuple[Address, ...] = tuple(dict.fromkeys(self.configured))
+        self._holders: dict[tuple[int, int], Address] = {}
+        self._pinned: Address | None = None
 
     def _new_source(self, *, permanent: bool = False) -> Source:
         lim = self.limits
@@ -175,9 +194,17 @@ class PeerTable:
         if bucket is not None:
             bucket.charge(extra)
 
-    def accepted(self, addr: Address, now_ns: int, *, reply: bool) -> None:
-        """``addr`` sent an accepted frame: trust it (and make it a reply peer if ``reply``,
-        i.e. it speaks for an authorized system), room permitting."""
+    def accepted(
+        self,
+        addr: Address,
+        now_ns: int,
+        *,
+        reply: bool,
+        identity: tuple[int, int] | None = None,
+    ) -> None:
+        """``addr`` sent an accepted frame as ``identity`` (system, component): trust it,
+        and give it a reply slot if ``reply`` (it speaks for an authorized system), room
+        and priority permitting (module docstring)."""
         source = self._trusted.get(addr)
         if source is None:
             if len(self._trusted) >= self.limits.max_trusted + len(self.configured):
@@ -188,11 +215,46 @@ class PeerTable:
             self._trusted[addr] = source
         source.last_ns = now_ns
         if reply and not source.reply and not source.permanent:
-            if len(self.dynamic_peers()) >= self.limits.max_dynamic_peers:
+            self._admit_reply(addr, source, identity or (0, 0), now_ns)
+
+    def _admit_reply(
+        self, addr: Address, source: Source, identity: tuple[int, int], now_ns: int
+    ) -> None:
+        stale_ns = now_ns - int(self.limits.takeover_s * 1e9)
+        holder = self._holders.get(identity)
+        if holder is not None and holder != addr:
+            held = self._trusted.get(holder)
+            if held is not None and held.reply and held.last_ns > stale_ns:
+                self.stats.identity_taken += 1
+                return
+            self._release(holder)  # silent: a restarted ground station takes it back
+        if len(self.dynamic_peers()) >= self.limits.max_dynamic_peers:
+            silent = [
+                a for a, s in self._trusted.items()
+                if s.reply and not s.permanent and a != self._pinned and s.last_ns <= stale_ns
+            ]  # fmt: skip
+            if not silent:
                 self.stats.peers_full += 1
                 return
-            source.reply = True
-            self._publish()
+            self._release(min(silent, key=lambda a: self._trusted[a].last_ns))
+            self.stats.slots_freed += 1
+        source.reply, source.identity = True, identity
+        self._holders[identity] = addr
+        if self._pinned is None:
+            self._pinned = addr
+        self._publish()
+
+    def _release(self, addr: Address) -> None:
+        """``addr`` loses its reply slot (it stays trusted while it talks)."""
+        source = self._trusted.get(addr)
+        if source is not None and source.reply:
+            source.reply = False
+            if source.identity is not None and self._holders.get(source.identity) == addr:
+                del self._holders[source.identity]
+            source.identity = None
+        if self._pinned == addr:
+            self._pinned = None
+        self._publish()
 
     def take_reply(self, addr: Address | None, now_ns: int, cost: float = 1.0) -> bool:
         """Charge ``cost`` replies to the source that asked; False (counted) if spent."""
@@ -209,10 +271,9 @@ class PeerTable:
         horizon = now_ns - int(self.limits.peer_timeout_s * 1e9)
         stale = [a for a, s in self._trusted.items() if not s.permanent and s.last_ns < horizon]
         for addr in stale:
-            source = self._trusted.pop(addr)
+            self._release(addr)
+            self._trusted.pop(addr)
             self.stats.expired += 1
-            if source.reply:
-                self._publish()
 
     def _publish(self) -> None:
         dynamic = [a for a, s in self._trusted.items() if s.reply and not s.permanent]

@@ -97,7 +97,9 @@ def test_gcs_receives_vessel_odometry_and_statustext(gcs_and_vessel_peer) -> Non
 def topology() -> Iterator[tuple[MavlinkGcsLink, MavlinkAllocatorLink, MavlinkVesselLink]]:
     gcs_port, allocator_port, vessel_port = free_udp_ports(3)
     gcs_ep = MavlinkEndpoint.inbox(gcs_port, GCS_IDS, (allocator_port, vessel_port))
-    alloc_ep = MavlinkEndpoint.inbox(allocator_port, ALLOCATOR_IDS, (gcs_port,))
+    alloc_ep = MavlinkEndpoint.inbox(
+        allocator_port, ALLOCATOR_IDS, (gcs_port,), relay=(vessel_port,)
+    )  # the vessel's inbox: the one address ODOMETRY is accepted from
     vessel_ep = MavlinkEndpoint.inbox(vessel_port, VESSEL_IDS, (allocator_port, gcs_port))
     config = AllocatorLinkConfig(n_thrusters=3, max_wrench=(100.0, 50.0, 80.0))
     params = [ParamSpec("ALLOC_W_U", 1.0, min=0.0, max=10.0)]

@@ -42,6 +42,16 @@ class DrawnKind(enum.Enum):
     PARTIAL = "partial"
     BIAS = "bias"
     INTERMITTENT = "intermittent"
+    RAMP = "ramp"  # a gradual loss: delta falls linearly to its final value
+    FROZEN = "frozen"  # the output frozen at its onset value
+    TRANSIENT = "transient"  # dead for a while, then working again (recovery)
+    DOUBLE = "double"  # two thrusters dead at once
+    TELEMETRY_LOST = "telemetry-lost"  # a working thruster whose drive stops reporting
+
+
+#: The kinds a ``[faults]`` table without ``kinds`` draws (the first generator's).
+CLASSIC_KINDS = (DrawnKind.DEAD, DrawnKind.STUCK, DrawnKind.PARTIAL, DrawnKind.BIAS,
+                 DrawnKind.INTERMITTENT)  # fmt: skip
 
 
 class HarmStatistic(enum.Enum):
@@ -108,7 +118,7 @@ class FaultSpec:
     """``[faults]``: the random fault generator's ranges (uniform draws); times in s,
     bias and stuck forces as fractions of the thruster's range."""
 
-    kinds: tuple[DrawnKind, ...] = tuple(DrawnKind)
+    kinds: tuple[DrawnKind, ...] = CLASSIC_KINDS
     each_kind: bool = True  # one case per kind and seed (else the kind is drawn too)
     count: int = 1  # faults per run, on different thrusters
     onset: Range = (10.0, 20.0)
@@ -119,6 +129,10 @@ class FaultSpec:
     stuck: Range = (0.2, 0.6)
     intermittent_on: Range = (3.0, 6.0)
     intermittent_off: Range = (5.0, 10.0)
+    ramp_delta: Range = (0.0, 0.5)  # a ramp's final delta
+    ramp_s: Range = (30.0, 120.0)  # how long it takes to get there
+    transient_s: Range = (20.0, 60.0)  # how long a transient fault lasts
+    causes: bool = False  # draw each fault's physical cause (vessels with drives)
 
 
 @dataclass(frozen=True)
@@ -226,7 +240,7 @@ def _variants(head: Table, root: Table) -> tuple[Variant, ...]:
 
 
 RANGES: tuple[str, ...] = ("onset", "duration", "partial_delta", "bias", "stuck")
-RANGES += ("intermittent_on", "intermittent_off")
+RANGES += ("intermittent_on", "intermittent_off", "ramp_delta", "ramp_s", "transient_s")
 
 
 def _faults(t: Table) -> FaultSpec:
@@ -244,6 +258,7 @@ def _faults(t: Table) -> FaultSpec:
         kinds=tuple(DrawnKind(k) for k in dict.fromkeys(kinds)),
         each_kind=t.boolean("each_kind", d.each_kind),
         count=t.integer("count", d.count, lo=1),
+        causes=t.boolean("causes", d.causes),
         thrusters=None if thrusters is None else tuple(i - 1 for i in thrusters),
         **ranges,  # type: ignore[arg-type]
     )

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from ftcap_hil.config.campaign import (
+    CLASSIC_KINDS,
     DrawnKind,
     FaultSpec,
     load_campaign,
@@ -124,7 +125,7 @@ def test_an_unknown_key_names_the_file_the_table_and_the_nearest_key(
     [
         ({"campaign": {"modes": ["ftcap", "nope"]}}, "'nope' is no mode"),
         ({"campaign": {"seed_count": 2}}, "one of them"),
-        ({"faults": {"kinds": ["ramp"]}}, r"\[faults\] kinds: expected a list from"),
+        ({"faults": {"kinds": ["rampe"]}}, r"\[faults\] kinds: expected a list from"),
         ({"faults": {"onset": [5.0, 1.0]}}, r"\[faults\] onset: expected \[low, high\]"),
         ({"faults": {"partial_delta": [0.5, 1.0]}}, "below 1"),
         ({"metrics": {"harm_ratio": 0.9}}, "harm_ratio"),
@@ -222,7 +223,7 @@ def test_the_generator_is_reproducible_and_follows_its_ranges() -> None:
     other = random_faults(np.random.default_rng(8), u_range, 100.0, spec)
     assert other != draws[0]
     for seed in range(40):
-        for kind in DrawnKind:
+        for kind in CLASSIC_KINDS:
             gen = random_faults(np.random.default_rng(seed), u_range, 100.0, spec, kind)
             assert len({g.thruster for g in gen}) == 2
             for g in gen:
@@ -248,6 +249,46 @@ def _check(kind: DrawnKind, tables: tuple, spec: FaultSpec) -> None:
         assert first["delta"] == 0.0 and 0.02 <= abs(first["bias"]) <= 0.06
     else:
         assert (first["delta"], first["bias"]) == (0.0, 0.0)
+
+
+def test_the_new_kinds_give_ramps_frozen_outputs_transients_doubles_and_lost_telemetry() -> None:
+    spec = FaultSpec(count=1, onset=(10.0, 20.0), causes=True)
+    u_range = np.full(4, 0.1)
+    seen_causes: set[str] = set()
+    for seed in range(60):
+        draw = {k: random_faults(np.random.default_rng(seed), u_range, 300.0, spec, k)
+                for k in DrawnKind}  # fmt: skip
+        ((ramp,),) = [g.tables for g in draw[DrawnKind.RAMP]]
+        assert ramp["kind"] == "ramp" and 0.0 <= ramp["delta"] <= 0.5
+        assert 30.0 <= ramp["ramp_s"] <= 120.0 and ramp["cause"] in (
+            "weak-motor",
+            "fouled",
+            "hull-loss",
+        )
+        ((frozen,),) = [g.tables for g in draw[DrawnKind.FROZEN]]
+        assert frozen["kind"] == "stuck" and "cause" not in frozen
+        ((transient,),) = [g.tables for g in draw[DrawnKind.TRANSIENT]]
+        assert 20.0 <= transient["until"] - transient["from"] <= 60.0 and transient["delta"] == 0.0
+        a, b = draw[DrawnKind.DOUBLE]
+        assert a.thruster != b.thruster and a.kind is b.kind is DrawnKind.DOUBLE
+        assert a.tables[0]["from"] == b.tables[0]["from"] and a.tables[0]["delta"] == 0.0
+        ((lost,),) = [g.tables for g in draw[DrawnKind.TELEMETRY_LOST]]
+        assert (lost["delta"], lost["bias"], lost["cause"]) == (1.0, 0.0, "telemetry-lost")
+        seen_causes |= {t["cause"] for g in draw[DrawnKind.DEAD] for t in g.tables}
+    assert seen_causes == {"drive-dead", "power-lost", "jammed"}
+    plain = random_faults(np.random.default_rng(1), u_range, 300.0, FaultSpec(), DrawnKind.DEAD)
+    assert "cause" not in plain[0].tables[0]  # causes off: the default of its delta
+    with pytest.raises(ValueError, match="each_kind"):
+        random_faults(
+            np.random.default_rng(1), u_range, 300.0, FaultSpec(kinds=(DrawnKind.DOUBLE,))
+        )
+
+
+def test_every_new_kind_plans_into_scenarios_that_load(tmp_path: Path) -> None:
+    doc = deep_merge(tomllib.loads(SMALL), {"faults": {"kinds": [k.value for k in DrawnKind]}})
+    plan, _ = plan_campaign(parse_campaign(doc, "small.toml"), tmp_path)
+    kinds = {t.kind for t in plan.tasks}
+    assert {"ramp", "frozen", "transient", "double", "telemetry-lost"} <= kinds
 
 
 def test_faults_with_a_duration_range_end_within_it() -> None:
@@ -279,7 +320,7 @@ def test_drawn_kinds_come_from_the_spec_and_every_one_is_drawn() -> None:
     assert seen == {DrawnKind.STUCK, DrawnKind.BIAS}
     every = FaultSpec(count=1)
     seen = {g.kind for _ in range(200) for g in random_faults(rng, np.full(4, 0.1), 60.0, every)}
-    assert seen == set(DrawnKind)
+    assert seen == set(CLASSIC_KINDS)  # the default kinds: the first generator's
 
 
 def test_faults_fall_on_the_allowed_thrusters_once_each_in_thruster_order() -> None:

@@ -50,6 +50,7 @@ from bridges.can_io.esc_stream import (
     DEFAULT_RATE_HZ,
     EscCommandStream,
 )
+from bridges.can_io.follower import CommandFollower
 from bridges.can_io.force_map import ForceMap
 from bridges.can_io.node import ConflictDetector
 from bridges.can_io.ports import CanReceiver, CanSender
@@ -305,10 +306,13 @@ class CanCommandSource(CanReceiver):
 
     ``allocator_node_id=None`` accepts commands from any node. A command whose length is not
     ``force_map.m`` is malformed. The allocator's NodeStatus lands in ``allocator_status``.
-    ``conflict`` watches the allocator's node ID for a second sender (``node.py``); while a
-    conflict is on, commands are dropped (``dropped_in_conflict``) unless
-    ``obey_in_conflict``: which sender is genuine cannot be told, and the ESC timeout then
-    stops the thrusters rather than obey a stranger.
+    ``conflict`` watches the allocator's node ID for a second sender (``node.py``).
+
+    A RawCommand is obeyed only if it continues the stream being followed (``follower``,
+    :class:`~bridges.can_io.follower.CommandFollower`: transfer IDs in sequence, a changed
+    command confirmed by the next frame while the ID is suspicious, zero at once when two
+    senders share one sequence); ``obey_in_conflict`` turns that off.
+    ``dropped_in_conflict``: commands dropped while a conflict was on.
     """
 
     def __init__(
@@ -321,6 +325,7 @@ class CanCommandSource(CanReceiver):
         poll_timeout_s: float = 0.1,
         obey_in_conflict: bool = False,
         owns_bus: bool = False,
+        resync_s: float = 0.05,
     ) -> None:
         if allocator_node_id is not None:
             check_node_id("allocator_node_id", allocator_node_id)
@@ -336,6 +341,7 @@ class CanCommandSource(CanReceiver):
         self.conflict = None if allocator_node_id is None else ConflictDetector(allocator_node_id)
         self._obey_in_conflict = obey_in_conflict
         self.dropped_in_conflict = 0
+        self.follower = CommandFollower(resync_s)
         super().__init__(
             bus,
             owns_bus,
@@ -353,20 +359,28 @@ class CanCommandSource(CanReceiver):
         if isinstance(msg, NodeStatusMsg):
             self.allocator_status.put(msg, now_ns)
         elif isinstance(msg, RawCommandMsg):
-            if in_conflict and not self._obey_in_conflict:
-                self.dropped_in_conflict += 1
-                return
-            if len(msg.raw) != self.force_map.m:
+            if len(msg.raw) != self.force_map.m:  # before the sequence: it must not move it
                 raise MalformedMessage(
                     f"RawCommand: {len(msg.raw)} values for {self.force_map.m} thrusters"
                 )
-            u = self.force_map.to_force(msg.raw)
-            command = ThrusterCommand.checked(u, self.force_map.m)
-            self.raw_commands.put(msg.raw, now_ns)
-            if msg.raw != self._last_raw:
-                self._last_raw = msg.raw
-                self.changes.put(command, now_ns)
-            self.commands.put(command, now_ns)
+            suspicious = self.conflict is not None and self.conflict.suspicious(now_ns)
+            if not self._obey_in_conflict and not self.follower.admit(
+                got.transfer_id, msg.raw, self._last_raw, now_ns,
+                in_conflict=in_conflict, suspicious=suspicious,
+            ):  # fmt: skip
+                self.dropped_in_conflict += in_conflict
+                if self.follower.take_stop():  # two senders on one sequence: stop now
+                    self._apply((0,) * self.force_map.m, now_ns)
+                return
+            self._apply(msg.raw, now_ns)
+
+    def _apply(self, raw: tuple[int, ...], now_ns: int) -> None:
+        command = ThrusterCommand.checked(self.force_map.to_force(raw), self.force_map.m)
+        self.raw_commands.put(raw, now_ns)
+        if raw != self._last_raw:
+            self._last_raw = raw
+            self.changes.put(command, now_ns)
+        self.commands.put(command, now_ns)
 
     def _count_malformed(self) -> None:
         self.commands.count_malformed()

@@ -182,6 +182,7 @@ class ConflictDetector:
         self._recent: deque[int] = deque(maxlen=threshold)
         self._conflict = Conflict(f"node {node_id}", clear_after_s)
         self.anomalies = 0
+        self._last_anomaly_ns: int | None = None
 
     @property
     def conflicts(self) -> int:
@@ -191,6 +192,13 @@ class ConflictDetector:
     def in_conflict(self, now_ns: int | None = None) -> bool:
         """A conflict is on now."""
         return self._conflict.active(now_ns)
+
+    def suspicious(self, now_ns: int) -> bool:
+        """A conflict is on, or an anomaly was seen within the window: a second sender may
+        be on the ID (its next frames must prove themselves)."""
+        last = self._last_anomaly_ns
+        recent = last is not None and now_ns - last <= self._window_ns
+        return recent or self.in_conflict(now_ns)
 
     def observe(self, got: Received, now_ns: int) -> bool:
         """Take one transfer from ``node_id``; True while a conflict is on."""
@@ -215,6 +223,7 @@ class ConflictDetector:
 
     def _anomaly(self, now_ns: int, detail: str, weight: int = 1) -> None:
         self.anomalies += 1
+        self._last_anomaly_ns = now_ns
         for _ in range(weight):
             self._recent.append(now_ns)
         if len(self._recent) == self._threshold and now_ns - self._recent[0] <= self._window_ns:

@@ -38,10 +38,10 @@ class AllocatorSettings(Protocol):
     def source(self) -> str: ...
 
 
-def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, Any]:
+def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, Any, Any]:
     """The CAN bus, the thruster sink on it (zero on close; its ESC command stream is
     started by ``build_ports``), the ESC status source (None with ``[can] esc_monitor =
-    false``) and the node's GetNodeInfo server."""
+    false``) and the node's GetNodeInfo server (which also sees a second node on our ID)."""
     from bridges.can_io.adapters import CanEscStatusSource, CanThrusterSink
     from bridges.can_io.bus import open_can_bus
 
@@ -53,8 +53,8 @@ def open_can(cfg: AllocatorSettings, stack: contextlib.ExitStack) -> tuple[Any, 
     esc = None
     if c.esc_monitor:
         esc = stack.enter_context(CanEscStatusSource(bus, ths.m, esc_node_ids=c.esc_node_ids))
-    _serve_node_info(c, bus, sink, None if esc is None else esc.notifier, stack)
-    return sink, esc
+    server = _serve_node_info(c, bus, sink, None if esc is None else esc.notifier, stack)
+    return sink, esc, server
 
 
 def _force_map(c: CanSettings, ths: ThrusterSet) -> Any:
@@ -68,13 +68,14 @@ def _force_map(c: CanSettings, ths: ThrusterSet) -> Any:
 
 def _serve_node_info(
     c: CanSettings, bus: Any, sink: Any, notifier: Any, stack: contextlib.ExitStack
-) -> None:
+) -> Any:
     """Answer GetNodeInfo as ``c.node_name`` (on the ESC source's notifier: one per bus)."""
     from bridges.can_io.node import CanNodeServer, NodeInfo, unique_id_for
 
     info = NodeInfo(c.node_name, unique_id=unique_id_for(c.node_name, c.node_id))
     server = CanNodeServer(bus, {c.node_id: info}, sink.current_status, notifier=notifier)
     stack.callback(server.shutdown)
+    return server
 
 
 class NodeHealthSink:
@@ -111,7 +112,8 @@ def build_ports(
     """The daemon's ports from ``cfg``'s [can], [mavlink] and [zenoh] tables, and the
     MAVLink parameter table as live tunables (None without MAVLink). The ESC command stream (unless
     ``esc_rate_hz = 0``) re-sends the latest command from here on."""
-    sink, esc = open_can(cfg, stack)
+    sink, esc, server = open_can(cfg, stack)
+    node_id = cfg.ports.can.node_id
     ports = Ports(
         setpoints=[],
         telemetry=[],
@@ -119,6 +121,7 @@ def build_ports(
         status=[NodeHealthSink(sink)],
         esc_ages=esc.ages_s if esc is not None else None,
         esc_latest=_latest_of(esc) if esc is not None else None,
+        bus_conflict=lambda now_ns: bool(server.in_conflict(node_id, now_ns)),
     )
     params = open_mavlink(cfg, stack, ports)
     open_zenoh(cfg, stack, ports)

@@ -21,7 +21,7 @@ from ftcap_hil.report.campaign_summary import (
     run_groups,
     write_tables,
 )
-from ftcap_hil.report.campaign_sweep import sweep_rows
+from ftcap_hil.report.campaign_sweep import headline_rows, sweep_rows
 
 RUN_COLUMNS = (
     ("mode", "mode"),
@@ -74,6 +74,13 @@ PERCENT = {
     "isolated_30s",
     "never",
 }
+
+
+def headline_block(summary: str) -> str:
+    """The headline table of a summary.md, between its markers (the README carries the
+    same block; a test holds the two equal)."""
+    start, end = summary.index(HEADLINE_BEGIN), summary.index(HEADLINE_END)
+    return summary[start : end + len(HEADLINE_END)]
 
 
 def fmt(value: Any, key: str = "") -> str:
@@ -132,6 +139,19 @@ HARM_COLUMNS = (
     ("dev/oracle", "dev_ratio_oracle"),
     ("replay", "replay"),
 )
+HEADLINE_COLUMNS = (
+    ("mode", "mode"),
+    ("scenario", "scenario"),
+    ("healthy h", "healthy_hours"),
+    ("false-alarm episodes /h", "false_alarm_episodes_per_h"),
+    ("faults", "faults"),
+    ("isolated <= 5 s", "isolated_5s"),
+    ("isolated <= 30 s", "isolated_30s"),
+    ("never isolated", "never"),
+    ("runs with harm", "harm_share"),
+    ("dev/oracle med", "dev_ratio_oracle_median"),
+)
+HEADLINE_BEGIN, HEADLINE_END = "<!-- headline begin -->", "<!-- headline end -->"
 SWEEP_COLUMNS = (
     ("mode", "mode"),
     ("scenario", "scenario"),
@@ -198,6 +218,16 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "Delays count from the fault's detectable onset; a fault never detected counts as "
         "'never' (infinite) in the percentiles. [95 %]: the exact Poisson interval of a rate "
         "(n: events) or the Wilson interval of a share (n: trials).",
+        "",
+        "## Headline",
+        "",
+        "Per estimating mode and scenario: the false-alarm episodes per healthy hour, every "
+        "detectable fault's isolation and the runs with harm, each with its 95 % interval "
+        "and sample size; the median deviation over the oracle's.",
+        "",
+        HEADLINE_BEGIN,
+        *markdown_table(headline_rows(rows, fault_rows(rows)), HEADLINE_COLUMNS),
+        HEADLINE_END,
         "",
         "## Runs per mode and fault kind",
         "",

@@ -12,6 +12,7 @@ docs/campaigns.md.
 from __future__ import annotations
 
 import math
+import statistics
 from collections import defaultdict
 from typing import Any
 
@@ -39,15 +40,45 @@ def sweep_rows(rows: list[Row], faults: list[Row]) -> list[Row]:
     for (variant, scenario, kind), g in sorted(
         groups.items(), key=lambda kv: (kv[0][0], order.index(kv[0][1]), kv[0][2])
     ):
-        delays = [_delay(f) for f in g]
         row: Row = {"mode": variant, "scenario": scenario, "kind": kind, "faults": len(g)}
-        for limit in WITHIN_S:
-            put_interval(
-                row, f"isolated_{limit:g}s", wilson_share(sum(d <= limit for d in delays), len(g))
-            )
-        put_interval(row, "never", wilson_share(sum(math.isinf(d) for d in delays), len(g)))
+        _shares(row, [_delay(f) for f in g])
         out.append(row)
     return out + _healthy_rows(rows, order)
+
+
+def _shares(row: Row, delays: list[float]) -> None:
+    """The isolated-within and never shares of ``delays`` (inf: never) into ``row``."""
+    n = len(delays)
+    for limit in WITHIN_S:
+        put_interval(row, f"isolated_{limit:g}s", wilson_share(sum(d <= limit for d in delays), n))
+    put_interval(row, "never", wilson_share(sum(math.isinf(d) for d in delays), n))
+
+
+def headline_rows(rows: list[Row], faults: list[Row]) -> list[Row]:
+    """Per estimating mode and scenario, one line a reader takes away: the healthy hours
+    and false-alarm episodes per hour, every detectable fault's isolation (within 5 s,
+    30 s, never), the runs with harm and the median deviation over the oracle's; each
+    rate and share with its 95 % interval and sample size. ``rows`` with ``derive``'s
+    columns (harm, dev_ratio_oracle)."""
+    order = list(dict.fromkeys(r["scenario"] for r in rows))
+    healthy = {(h["mode"], h["scenario"]): h for h in _healthy_rows(rows, order)}
+    out = []
+    for (variant, scenario), h in healthy.items():
+        row: Row = {k: v for k, v in h.items() if k != "kind"}
+        det = [f for f in faults if (f["variant"], f["scenario"]) == (variant, scenario)
+               and f["detectable"]]  # fmt: skip
+        row["faults"] = len(det)
+        _shares(row, [_delay(f) for f in det])
+        runs = [r for r in rows if (r["variant"], r["scenario"]) == (variant, scenario)
+                and r["status"] == "ok"]  # fmt: skip
+        judged = [r for r in runs if r.get("harm") is not None]
+        put_interval(
+            row, "harm_share", wilson_share(sum(bool(r["harm"]) for r in judged), len(judged))
+        )
+        ratios = [r["dev_ratio_oracle"] for r in runs if r.get("dev_ratio_oracle") is not None]
+        row["dev_ratio_oracle_median"] = statistics.median(ratios) if ratios else None
+        out.append(row)
+    return out
 
 
 def _healthy_rows(rows: list[Row], order: list[str]) -> list[Row]:

@@ -41,7 +41,7 @@ from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import EventQueue, Mailbox
 from ftcap_hil.ports.transitions import TransitionLog, log_to
 from ftcap_hil.runtime.calls import PendingCalls
-from ftcap_hil.runtime.esc_watchdog import EscStallMonitor, EscWatchdog
+from ftcap_hil.runtime.esc_watchdog import BusGuard, EscStallMonitor, EscWatchdog
 from ftcap_hil.runtime.estimation import EstimationSampler
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.loop import DeadlineLoop, fast_thread_switch
@@ -95,6 +95,7 @@ class Ports:
     esc_latest: Callable[[], Sequence[EscStatus | None]] | None = None  # per thruster
     modes: list[EventQueue[Mode]] = field(default_factory=list)  # mode requests (ROS 2 topic)
     untrusted_telemetry: list[Mailbox[Odometry]] = field(default_factory=list)
+    bus_conflict: Callable[[int], bool] | None = None  # now_ns -> our CAN node ID in conflict
 
     def malformed(self) -> int:
         """Malformed inputs dropped so far on every setpoint and telemetry port."""
@@ -137,6 +138,7 @@ class AllocatorDaemon:
         self.lapses = 0  # lapses of the thrusters' command stream (restarts from zero)
         self.transitions = TransitionLog(self._announce)
         self.esc_watchdog = EscWatchdog(self.transitions)
+        self.bus_guard = BusGuard(self.transitions, ports.bus_conflict)
         self.esc_stall = EscStallMonitor(
             self.transitions, self.core.u_range, config.esc_stall_rpm, config.esc_stall_s
         )
@@ -235,7 +237,10 @@ class AllocatorDaemon:
         elapsed_s = self._elapsed_s(now)
         setpoint, sp_stamp = _latest(self.ports.setpoints)
         fresh = self._freshness(now, sp_stamp, self.telemetry.newest_stamp())
-        sample = self.telemetry.sample(now, fresh.telemetry_stale)
+        attacked, ended = self.bus_guard.attacked(now)
+        if ended:
+            self.sampler.restart()  # the ESCs' commands over the conflict are unknown
+        sample = self.telemetry.sample(now, fresh.telemetry_stale or attacked)
         result = None
         self._restart_after_lapse()
         if fresh.setpoint_stale:
@@ -250,7 +255,7 @@ class AllocatorDaemon:
                 obs,
                 u_sample=u_mean,
                 elapsed_s=elapsed_s,
-                evidence=self._evidence(now, fresh),
+                evidence=Evidence.none(self.core.m) if attacked else self._evidence(now, fresh),
             )
             self._send(result.u, now, started)
             if sp_stamp != self._last_sp_stamp:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 
@@ -158,3 +159,33 @@ class EscStallMonitor:
                 f"ESC {n}: turning again",
             )
         return self._stalled.copy()
+
+
+class BusGuard:
+    """A bus under attack: while ``in_conflict(now_ns)`` says a second node sends with the
+    allocator's node ID (DroneCAN has no authentication), what the ESCs do and report may
+    follow a stranger's commands, so neither the estimator nor the ESC evidence (silent,
+    stalled) may judge the thrusters: estimation is frozen and the evidence ignored; the
+    allocation goes on within its limits. Announced once when it starts and when it ends."""
+
+    def __init__(
+        self, transitions: TransitionLog, in_conflict: Callable[[int], bool] | None
+    ) -> None:
+        self._transitions = transitions
+        self._in_conflict = in_conflict
+        self.episodes = 0
+
+    def attacked(self, now_ns: int) -> tuple[bool, bool]:
+        """(on now, just ended) at ``now_ns``."""
+        on = self._in_conflict is not None and self._in_conflict(now_ns)
+        was = self._transitions["can_conflict"]
+        self._transitions.update(
+            "can_conflict",
+            on,
+            "CAN node-ID conflict: another node sends as the allocator; estimation frozen, "
+            "ESC evidence ignored",
+            "CAN node-ID conflict over: estimation and ESC evidence resume",
+            Severity.ERROR,
+        )
+        self.episodes += on and not was
+        return on, was and not on

@@ -216,6 +216,10 @@ class EstimationSampler:
         self._clock_fed = (-1, -1)  # (receipt stamp, mapped stamp) of the last odometry
         self._last: _Point | None = None
 
+    def restart(self) -> None:
+        """Start a new interval at the next sample: what lies before may not be trusted."""
+        self._last = None
+
     def command_sent(self, stamp_ns: int, u: FloatArray) -> None:
         """Command ``u`` (m,) in N went to the thrusters at ``stamp_ns``."""
         self.history.add(stamp_ns, u)

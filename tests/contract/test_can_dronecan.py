@@ -180,7 +180,7 @@ def test_malformed_frames_counted_and_dropped(bus_factory: Callable[[], can.BusA
         good = encode_raw_command([1, 2, 3, 4, 5, 6], source_node_id=10, transfer_id=3)
         bad_crc = [CanFrame(good[0].can_id, bytes([good[0].data[0] ^ 1]) + good[0].data[1:])]
         put(bad_crc + good[1:])  # 1: CRC mismatch
-        put(encode_raw_command([1, 2, 3], source_node_id=10, transfer_id=4))  # 2: wrong m
+        put(encode_raw_command([1, 2, 3], source_node_id=10, transfer_id=2))  # 2: wrong m
         put([CanFrame(good[0].can_id, b"\x01\x02\x03\xc5")])  # 3: bad length
         put(encode_raw_command([9] * 6, source_node_id=11, transfer_id=0))  # other node: ignored
         put(status(5, 20) + status(1, 20) + [CanFrame(status(0, 20)[0].can_id, b"\xc0")])

@@ -64,3 +64,27 @@ def test_the_summary_says_which_seeds_were_evaluated_and_which_tuned() -> None:
         " Evaluated on seeds 1-3, 7; thresholds tuned on seeds 1001-1003 (disjoint)."
     )
     assert _seeds_text(rows, []) == " Evaluated on seeds 1-3, 7."
+
+
+def test_the_headline_pools_a_conditions_faults_harm_and_healthy_hours() -> None:
+    from ftcap_hil.report.campaign_report import headline_block
+    from ftcap_hil.report.campaign_sweep import headline_rows
+
+    rows = [_run("bf3", 10.0, 2)] + [
+        {**_run("bf3", 0.0, 0), "harm": h, "dev_ratio_oracle": d}
+        for h, d in ((True, 1.3), (False, 1.0), (None, 0.9), (False, 1.1))
+    ]
+    faults = [_fault("bf3", d, kind=k) for d, k in ((2.0, "dead"), (40.0, "ramp"), (None, "ramp"))]
+    (row,) = headline_rows(rows, faults)
+    assert (row["mode"], row["scenario"], row["healthy_hours"], row["faults"]) == (
+        "ftcap",
+        "bf3",
+        10.0,
+        3,
+    )
+    assert row["false_alarm_episodes_per_h"] == 0.2 and row["false_alarm_episodes_per_h_n"] == 2
+    assert (row["isolated_5s"], row["isolated_30s"], row["never"]) == (1 / 3, 1 / 3, 1 / 3)
+    assert row["harm_share"] == pytest.approx(1 / 3) and row["harm_share_n"] == 3  # one not judged
+    assert row["dev_ratio_oracle_median"] == pytest.approx(1.05)  # of 0.9, 1.0, 1.1, 1.3
+    text = "x\n<!-- headline begin -->\n| a |\n<!-- headline end -->\ny"
+    assert headline_block(text) == "<!-- headline begin -->\n| a |\n<!-- headline end -->"

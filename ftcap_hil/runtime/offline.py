@@ -132,7 +132,13 @@ def _run_truth(
     model = TruthModel(sc.truth, sc.x0)
     rec = Recorder(sc, mode.value)
     every = max(1, round((sc.estimation_period_s or sc.dt_s) / sc.dt_s))
-    latest = model.start()[-1]
+    # Before the sensor's first delivery (a delayed sensor, a dropout at 0 s) the loop holds
+    # the initial state it was set up in; the estimator never takes an interval from it.
+    start = model.start()
+    placed = Measurement(
+        0.0, 0.0, np.array(sc.x0[:3], dtype=float), np.array(sc.x0[3:], dtype=float)
+    )
+    latest = start[-1] if start else placed
     used: Measurement | None = None
     u_sum, u_time = np.zeros(sc.thrusters.m), 0.0
     reports: list[DriveReport] = []
@@ -141,7 +147,7 @@ def _run_truth(
         x_meas = np.concatenate([latest.eta, latest.nu])
         w, u_mean = None, None
         if k % every == 0 and latest is not used:
-            if used is not None and u_time > 0.0:
+            if used is not None and used is not placed and u_time > 0.0:
                 x_prev = np.concatenate([used.eta, used.nu])
                 w = Observation(x_prev, x_meas, latest.t_measured_s - used.t_measured_s)
                 u_mean = u_sum / u_time  # the command's mean over the estimation interval

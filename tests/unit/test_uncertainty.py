@@ -101,3 +101,16 @@ def test_uncertainty_is_read_strictly(change: dict, message: str) -> None:
         doc.setdefault(table, {}).update(values)
     with pytest.raises(ConfigError, match=rf"u\.toml.*{message}"):
         parse_scenario(doc, "u.toml")
+
+
+def test_a_delayed_sensor_runs_from_the_initial_state_until_its_first_delivery() -> None:
+    """A drawn (or stated) sensor delay longer than a step delivers nothing at 0 s: the
+    closed loop holds the state it was set up in until then (it raised IndexError)."""
+    from ftcap_hil.core.status import Mode
+    from ftcap_hil.runtime.offline import run_mode
+
+    doc = _doc(seed=0, uncertainty=None)
+    doc["sensor"] = {"delay_s": 0.35}
+    doc["scenario"]["duration"] = 3.0
+    rec = run_mode(parse_scenario(doc, "u.toml"), Mode.FTCAP)
+    assert rec.t.size == 30 and np.isfinite(rec.columns["north"]).all()

@@ -1,17 +1,16 @@
-"""Benchmark: the offline loop's throughput, simulated seconds per wall-clock second.
+"""Benchmark: the offline loop's throughput, simulated seconds per second.
 
 A campaign's throughput is that of ``runtime.offline.run_mode``: the controller, the
 allocator core, the truth (the paper's plant, or sim/'s realistic truth) and the recorder,
 one control period after another. Each round runs every scenario once (mode ``ftcap``,
-seed 1) and, just before each, a fixed reference workload: 2000 cycles of a pinv + clip +
-slew allocator on the paper vessel (bench/cycle_floor.py's floor). The load-independent
-figure is the wall time of one simulated second in those reference cycles.
+seed 1) and reports simulated seconds per second of the process's CPU time (what a Dask
+worker's core delivers; less sensitive to other work on the machine than the wall clock)
+and per wall-clock second, and the time inside ``FtcapCore.step`` as a share of the run.
 
     python bench/offline_rate.py [SCENARIO ...] [--rounds 3] [--json FILE]
 
-Prints, per scenario, min / median / max over the rounds of sim-s per wall-s and of the
-wall time per simulated second in pinv cycles, the time inside ``FtcapCore.step`` as a
-share of the run, and the load average.
+Before/after figures come from alternating runs of two trees (PYTHONPATH=<tree>), each
+pair's ratio being the figure to quote (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -26,40 +25,21 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.config.scenario import load_scenario
-from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.offline import run_mode
 
 DEFAULT = ("paper-4.2-ex1", "cybership2-station")
-REFERENCE_CYCLES = 2000
-
-
-def reference_s() -> float:
-    """Wall time of REFERENCE_CYCLES pinv + clip + slew allocations (paper vessel)."""
-    ts = paper_four_thrusters()
-    B_pinv = np.linalg.pinv(effectiveness(ts))
-    u_min, u_max, step = ts.u_min, ts.u_max, ts.max_step(0.2827)
-    tau = np.random.default_rng(0).normal(0.0, 0.1, size=(REFERENCE_CYCLES, 3))
-    u = np.zeros(ts.m)
-    t0 = time.perf_counter()
-    for n in range(REFERENCE_CYCLES):
-        lo = np.maximum(u_min, u - step)
-        hi = np.minimum(u_max, u + step)
-        u = np.minimum(np.maximum(B_pinv @ tau[n], lo), hi)
-    return time.perf_counter() - t0
 
 
 def one_run(name: str) -> dict[str, float]:
-    """One ``ftcap`` run of ``name`` (seed 1): its wall time, simulated time, core time."""
+    """One ``ftcap`` run of ``name`` (seed 1): sim-s per CPU-s and per wall-s, core share."""
     sc = dataclasses.replace(load_scenario(name), seed=1)
-    ref = reference_s()
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     rec = run_mode(sc, Mode.FTCAP)
-    wall = time.perf_counter() - t0
+    cpu, wall = time.process_time() - c0, time.perf_counter() - t0
     sim_s = sc.steps * sc.dt_s
     core_s = float(np.sum(rec.columns["solve_us"])) * 1e-6
-    per_sim_s = wall / sim_s / (ref / REFERENCE_CYCLES)
-    return {"sim_per_wall": sim_s / wall, "pinv_cycles_per_sim_s": per_sim_s,
+    return {"sim_per_cpu_s": sim_s / cpu, "sim_per_wall_s": sim_s / wall,
             "core_share": core_s / wall}  # fmt: skip
 
 

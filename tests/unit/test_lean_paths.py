@@ -19,6 +19,7 @@ from ftcap_hil.core.allocation.qp import _bound_size
 from ftcap_hil.core.cycle import CoreConfig, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.estimation.config import EstimatorConfig, wrench_scale
+from ftcap_hil.core.estimation.decisions import _best
 from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.estimation.step_models import VesselStep, inv_small
 from ftcap_hil.core.models.plants import SurfaceVessel
@@ -94,6 +95,23 @@ def test_an_absurd_demand_is_shrunk_and_a_nan_one_left_alone() -> None:
     assert huge[0] > 0.0 > huge[2]
     nan = np.array([math.nan, 1e308, 0.0])
     assert alloc._shrunk(nan) is nan
+
+
+def test_the_greedy_pick_is_numpys_argmax_of_the_qualifying_scores() -> None:
+    rng = np.random.default_rng(5)
+    for n in range(3000):
+        m = [1, 3, 4, 16][n % 4]
+        f = rng.normal(size=m) * rng.choice([0.1, 1.0, 10.0], size=m)
+        f[rng.random(m) < 0.1] = math.nan
+        f[rng.random(m) < 0.2] = 2.0  # ties
+        root, big = np.abs(rng.normal(size=m)) + 0.5, rng.uniform(0.0, 1.0, size=m)
+        need = np.where(rng.random(m) < 0.5, 2.0, 4.0)
+        on = rng.random(m) < 0.3
+        score = np.abs(f) * root
+        ok = (score > need) & (np.abs(f) >= big) & ~on
+        expected = int(np.argmax(np.where(ok, score, -np.inf))) if ok.any() else -1
+        args = (f.tolist(), root.tolist(), need.tolist(), big.tolist(), on.tolist())
+        assert _best(*args) == expected
 
 
 def cycles(core: FtcapCore, forget: bool) -> list[np.ndarray]:

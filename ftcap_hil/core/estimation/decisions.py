@@ -177,17 +177,16 @@ class FaultDecider:
         rest = delta_b.copy()
         c = self._B
         cwc = np.einsum("ji,jl,li->i", c, w, c)
-        # what the greedy steps share: computed once
-        cwc_floor, cwc_root = np.maximum(cwc, 1e-300), np.sqrt(cwc)
-        need = np.where(keep_on, 0.5 * z, z)  # hysteresis: half the level to stay on
-        big_at = self.config.bias_min_rel * self._range
+        # what the greedy steps share, computed once; the per-thruster tests in Python floats
+        cwc_floor = np.maximum(cwc, 1e-300)
+        root = np.sqrt(cwc).tolist()
+        need = np.where(keep_on, 0.5 * z, z).tolist()  # hysteresis: half the level to stay on
+        big_at = (self.config.bias_min_rel * self._range).tolist()
         for _ in range(self._m):
             f = (c.T @ (w @ rest)) / cwc_floor
-            score = np.abs(f) * cwc_root
-            ok = (score > need) & (np.abs(f) >= big_at) & ~on
-            if True not in ok.tolist():
+            i = _best(f.tolist(), root, need, big_at, on.tolist())
+            if i < 0:
                 break
-            i = _best(ok.tolist(), score.tolist())
             rest = rest - c[:, i] * f[i]
             on[i], f_all[i] = True, f[i]
             if dof == 0 or float(rest @ w @ rest) < limit:
@@ -198,11 +197,17 @@ class FaultDecider:
         self._bias_on, self._f = np.zeros(self._m, dtype=bool), np.zeros(self._m)
 
 
-def _best(ok: list[bool], score: list[float]) -> int:
-    """np.argmax(np.where(ok, score, -inf)) in Python floats: the first index of the largest
-    score among the ok ones (one at least)."""
-    best, index = -math.inf, 0
-    for i, (o, sc) in enumerate(zip(ok, score, strict=True)):
-        if o and sc > best:
-            best, index = sc, i
+def _best(
+    f: list[float], root: list[float], need: list[float], big_at: list[float], on: list[bool]
+) -> int:
+    """The greedy step's pick: among the thrusters not yet on whose score |f_i| root_i
+    exceeds need_i and whose |f_i| reaches big_at_i, the first of the largest score; -1 if
+    none. (numpy's (score > need) & (|f| >= big) & ~on, then argmax of the scores where
+    that holds, in Python floats: the same comparisons, a NaN never qualifying.)"""
+    best, index = -math.inf, -1
+    for i, fi in enumerate(f):
+        size = abs(fi)
+        score = size * root[i]
+        if score > need[i] and size >= big_at[i] and not on[i] and score > best:
+            best, index = score, i
     return index

@@ -72,11 +72,12 @@ def _log_summary(daemon: AllocatorDaemon) -> None:
         log.info("%s", line)
     log.info(
         "allocator: stopped after %d cycles, %d overruns, %d commands refused by the bus, "
-        "%d malformed inputs dropped",
+        "%d malformed inputs dropped (%d of them implausible telemetry)",
         daemon.cycles,
         daemon.overruns,
         daemon.not_sent,
-        daemon.ports.malformed(),
+        daemon.malformed,
+        daemon.sampler.gate.rejected,
     )
 
 
@@ -91,13 +92,15 @@ def run(args: argparse.Namespace) -> int:
                 lambda: daemon.request_exit() if time.monotonic() > stop_at else None
             )
         log.info(
-            "allocator: %s, %.1f Hz, %d thrusters, mode %s, %d setpoint / %d telemetry ports",
+            "allocator: %s, %.1f Hz, %d thrusters, mode %s, %d setpoint / %d telemetry ports"
+            " (+%d unauthenticated)",
             cfg.source,
             cfg.daemon.rate_hz,
             cfg.daemon.thrusters.m,
             cfg.daemon.core.mode.value,
             len(daemon.ports.setpoints),
             len(daemon.ports.telemetry),
+            len(daemon.ports.untrusted_telemetry),
         )
         try:
             return daemon.run()

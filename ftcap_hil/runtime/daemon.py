@@ -171,6 +171,12 @@ class AllocatorDaemon:
         return FtcapCore(self.config.B, self.config.thrusters, dt, core_cfg, self.config.plant)
 
     @property
+    def malformed(self) -> int:
+        """Inputs dropped so far: malformed on any port, or telemetry the gate found
+        implausible (the count the status and the exit line report)."""
+        return self.ports.malformed() + self.sampler.gate.rejected
+
+    @property
     def overruns(self) -> int:
         """Deadlines missed so far (a cycle that ran past the next deadline counts each)."""
         return self.loop.stats.overruns
@@ -355,9 +361,7 @@ class AllocatorDaemon:
         """The status after the latest cycle, with this cycle's ``fresh`` inputs."""
         return assemble_status(
             mode=self.config.core.mode,
-            counts=LoopCounts(
-                self.cycles, self.overruns, self.ports.malformed() + self.sampler.gate.rejected
-            ),
+            counts=LoopCounts(self.cycles, self.overruns, self.malformed),
             fresh=fresh,
             last=self._last,
             u=self.core.u_prev,

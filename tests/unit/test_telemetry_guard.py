@@ -67,3 +67,21 @@ def test_plain_mailboxes_are_judged_on_agreement_only() -> None:
     b.put(odo(1.0, north=30.0), 10 * S)
     got = guard.choose(10 * S, S)
     assert got.alarm is not None and got.frozen  # both trusted: nothing to prefer
+
+
+def test_the_exit_line_counts_the_gates_drops_with_the_malformed(caplog) -> None:  # type: ignore[no-untyped-def]
+    """Issue 22, item 8: the exit line's malformed count left out the gate's drops."""
+    import logging
+
+    from ftcap_hil.apps.allocator import _log_summary
+    from tests.unit.test_daemon_parts import _daemon
+
+    daemon, _, _ = _daemon()
+    box = daemon.ports.telemetry[0]
+    box.count_malformed()  # one undecodable sample on the port
+    box.put(Odometry(np.zeros(3), np.array([1e6, 0.0, 0.0]), 1.0))  # one absurd one
+    daemon.cycle(daemon.loop.clock())
+    assert daemon.sampler.gate.rejected == 1 and daemon.malformed == 2
+    with caplog.at_level(logging.INFO, logger="ftcap_hil.apps.allocator"):
+        _log_summary(daemon)
+    assert "2 malformed inputs dropped (1 of them implausible telemetry)" in caplog.text

@@ -277,8 +277,10 @@ class MavlinkAllocatorLink(PortOwner):
         current: Sequence[float],
         age: Sequence[float],
         failed: Sequence[bool],
+        voltage: Sequence[float] = (),
     ) -> bool:
-        """FTCAP_ESC_STATUS: per-thruster ESC telemetry (NaN = unknown, +inf age = never)."""
+        """FTCAP_ESC_STATUS: per-thruster ESC telemetry (NaN = unknown, +inf age = never),
+        and the standard ESC_STATUS (with ``voltage`` in V) / ESC_INFO."""
         n = self.config.n_thrusters
         fields = {
             "time_boot_ms": self._port.time_boot_ms(),
@@ -290,7 +292,9 @@ class MavlinkAllocatorLink(PortOwner):
         }
         msg = dialect_message(self._port.dialect, "FTCAP_ESC_STATUS", fields)
         ok = self._port.send(lambda mav: mav.send(msg))
-        standard = send_standard_esc(self._port, rpm, current, age, failed, n, self._esc_info)
+        standard = send_standard_esc(
+            self._port, rpm, current, age, failed, n, self._esc_info, voltage
+        )
         return standard and ok
 
     def set_system_status(self, status: SystemStatus) -> None:

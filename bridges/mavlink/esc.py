@@ -1,8 +1,9 @@
 """The allocator's ESC telemetry as the standard ESC_STATUS / ESC_INFO (four ESCs each).
 
-``ESC_STATUS`` (every call): rpm (int32; unknown -> 0), voltage (not measured: NaN), current
-(A; NaN if unknown). ``ESC_INFO`` (at most once per ``period_s``): ``count`` = number of
-thrusters, ``connection_type`` = ESC_CONNECTION_TYPE_DCAN (5), ``info`` bit i = ESC i of the
+``ESC_STATUS`` (every call): rpm (int32; unknown -> 0), voltage (V, as esc.Status reports
+it; NaN if unknown), current (A; NaN if unknown). ``ESC_INFO`` (at most once per
+``period_s``): ``count`` = number of thrusters, ``connection_type`` =
+ESC_CONNECTION_TYPE_CAN (4; common.xml's 5 is DShot), ``info`` bit i = ESC i of the
 group has reported and is not failed, ``failure_flags`` = ESC_FAILURE_GENERIC (64) for an ESC
 the allocator treats as failed (silent past its timeout), ``error_count`` 0 and
 ``temperature`` INT16_MAX (not reported by uavcan.equipment.esc.Status as we read it).
@@ -16,7 +17,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-ESC_CONNECTION_TYPE_DCAN = 5
+ESC_CONNECTION_TYPE_CAN = 4  # common.xml ESC_CONNECTION_TYPE: PPM 0, SERIAL 1, ONESHOT 2,
+# I2C 3, CAN 4, DSHOT 5
 ESC_FAILURE_GENERIC = 64
 INT16_MAX = 32767
 _INT32_MAX = 2**31 - 1
@@ -58,17 +60,23 @@ def send_standard_esc(
     failed: Sequence[bool],
     n: int,
     clock: EscInfoClock,
+    voltage: Sequence[float] = (),
 ) -> bool:
-    """ESC_STATUS for each group of four ESCs, and ESC_INFO when due; True if all went out."""
+    """ESC_STATUS for each group of four ESCs, and ESC_INFO when due; True if all went out.
+    ``voltage`` (V per ESC, NaN unknown; empty: none known)."""
     stamp = port.time_boot_us()
     info_due = clock.due(time.monotonic_ns())
     ok = True
     for start in range(0, n, 4):
         rpms = [_rpm(float(v)) for v in _group(rpm, start, math.nan)]
         amps = [float(v) for v in _group(current, start, math.nan)]
+        volts = [float(v) for v in _group(voltage, start, math.nan)]
 
-        def status(mav: Any, s: int = start, r: list[int] = rpms, a: list[float] = amps) -> None:
-            mav.esc_status_send(s, stamp, r, [math.nan] * 4, a)  # voltage: not measured
+        def status(
+            mav: Any, s: int = start, r: list[int] = rpms, a: list[float] = amps,
+            v: list[float] = volts,
+        ) -> None:  # fmt: skip
+            mav.esc_status_send(s, stamp, r, v, a)
 
         ok = port.send(status) and ok
         if info_due:
@@ -90,7 +98,7 @@ def _send_info(
     online = sum(1 << i for i in range(4) if math.isfinite(ages[i]) and not dead[i])
     flags = [ESC_FAILURE_GENERIC if d else 0 for d in dead]
     fields = (
-        start, stamp, counter, n, ESC_CONNECTION_TYPE_DCAN, online,
+        start, stamp, counter, n, ESC_CONNECTION_TYPE_CAN, online,
         flags, [0] * 4, [INT16_MAX] * 4,
     )  # fmt: skip
     return bool(port.send(lambda mav: mav.esc_info_send(*fields)))

@@ -9,6 +9,8 @@ matching MAV_SEVERITY.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
 from bridges.mavlink.allocator import MavlinkAllocatorLink
 from bridges.mavlink.codec import Severity as MavSeverity
 from bridges.mavlink.codec import SystemStatus
@@ -24,8 +26,13 @@ _SEVERITY = {
 class MavlinkStatusSink:
     """Daemon status -> the allocator link's MAVLink messages (module docstring)."""
 
-    def __init__(self, link: MavlinkAllocatorLink) -> None:
+    def __init__(
+        self,
+        link: MavlinkAllocatorLink,
+        esc_voltage: Callable[[], Sequence[float]] | None = None,
+    ) -> None:
         self._link = link
+        self._esc_voltage = esc_voltage  # V per ESC now (NaN unknown), for ESC_STATUS
 
     def publish(self, st: AllocatorStatus) -> None:
         """Send one status (checked when built: ``AllocatorStatus.checked``); the first call
@@ -34,7 +41,10 @@ class MavlinkStatusSink:
         self._link.set_system_status(state)
         self._link.send_thruster_commands(st.command)
         if st.esc_age_s:
-            self._link.send_esc_status(st.esc_rpm, st.esc_current_a, st.esc_age_s, st.esc_failed)
+            volts = () if self._esc_voltage is None else self._esc_voltage()
+            self._link.send_esc_status(
+                st.esc_rpm, st.esc_current_a, st.esc_age_s, st.esc_failed, volts
+            )
         self._link.send_status(st)
 
     def announce(self, text: str, severity: Severity) -> None:

@@ -11,6 +11,7 @@ and closes, newest first, when it closes.
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -169,7 +170,11 @@ def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Por
     )
     ports.setpoints += [link.setpoint, link.manual]
     ports.telemetry.append(link.odometry)  # trusted: the vessel's inbox address only
-    ports.status.append(MavlinkStatusSink(link))
+    latest = ports.esc_latest
+    volts = None
+    if latest is not None:
+        volts = lambda: [math.nan if e is None else e.voltage_v for e in latest()]  # noqa: E731
+    ports.status.append(MavlinkStatusSink(link, volts))
     return AllocatorTunables(link.params)
 
 

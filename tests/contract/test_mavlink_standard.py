@@ -115,12 +115,15 @@ def test_esc_telemetry_goes_out_as_esc_status_and_esc_info(allocator) -> None:
     link, gcs = allocator
     rpm = [1200.4, -800.0, math.nan, 0.0]
     current = [0.5, 0.4, math.nan, 0.05]
-    assert link.send_esc_status(rpm, current, [0.01, 0.02, math.inf, 0.1], [0, 0, 1, 0])
+    volts = [12.0, 11.5, math.nan, 12.0]
+    assert link.send_esc_status(rpm, current, [0.01, 0.02, math.inf, 0.1], [0, 0, 1, 0], volts)
     status = gcs.wait_for("ESC_STATUS")
     info = gcs.wait_for("ESC_INFO")
     assert status.index == 0 and status.rpm == [1200, -800, 0, 0]
     np.testing.assert_equal(status.current, [_f32(0.5), _f32(0.4), math.nan, _f32(0.05)])
-    assert (info.count, info.connection_type, info.info) == (4, 5, 0b1011)
+    np.testing.assert_equal(status.voltage, [12.0, 11.5, math.nan, 12.0])  # issue 22: was NaN
+    # ESC_CONNECTION_TYPE_CAN is 4 (common.xml; 5 is DShot)
+    assert (info.count, info.connection_type, info.info) == (4, 4, 0b1011)
     assert info.failure_flags == [0, 0, 64, 0] and info.temperature == [32767] * 4
     link.send_esc_status(rpm, current, [0.01] * 4, [0] * 4)
     gcs.pump(0.2)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import deque
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -20,6 +22,7 @@ from ftcap_hil.core.cycle import CoreConfig, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.estimation.config import EstimatorConfig, wrench_scale
 from ftcap_hil.core.estimation.decisions import _best
+from ftcap_hil.core.estimation.shaft_channel import Channel
 from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.estimation.step_models import VesselStep, inv_small
 from ftcap_hil.core.models.plants import SurfaceVessel
@@ -53,6 +56,36 @@ def test_one_state_nu_dot_is_the_array_arithmetic_to_the_bit(coriolis: bool) -> 
         assert np.array_equal(fast, reference)
         batch = plant.nu_dot(nu[None, :], tau[None, :])[0]  # the array path
         np.testing.assert_allclose(fast, batch, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("coriolis", [True, False])
+def test_one_state_damping_is_the_batch_one_to_the_bit(coriolis: bool) -> None:
+    rng = np.random.default_rng(8)
+    plant = some_vessel(rng, coriolis)
+    for _ in range(500):
+        nu = rng.normal(size=3)
+        assert np.array_equal(plant.damping(nu), plant.damping(nu[None, :])[0])
+
+
+def scanned(history: deque[tuple[float, ...]], t_s: float) -> tuple[float, ...]:
+    """The linear scan predicted_at replaced (the reference)."""
+    prev = history[0]
+    for entry in history:
+        if entry[0] >= t_s:
+            dt = entry[0] - prev[0]
+            w = 1.0 if dt <= 0.0 else (t_s - prev[0]) / dt
+            return tuple(p + w * (e - p) for p, e in zip(prev[1:], entry[1:], strict=True))
+        prev = entry
+    return prev[1:]
+
+
+def test_the_predicted_speed_is_the_scanned_one_to_the_bit() -> None:
+    rng = np.random.default_rng(9)
+    times = np.cumsum(rng.uniform(0.001, 0.2, size=60))
+    history = deque((float(t), *map(float, rng.normal(size=3))) for t in times)
+    channel = SimpleNamespace(history=history)
+    for t_s in [*rng.uniform(-1.0, times[-1] + 1.0, size=500), *times, times[0] - 1.0]:
+        assert Channel.predicted_at(channel, float(t_s)) == scanned(history, float(t_s))  # type: ignore[arg-type]
 
 
 def test_the_paper_vessels_step_is_the_generic_one_to_the_bit() -> None:

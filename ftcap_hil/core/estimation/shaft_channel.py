@@ -4,12 +4,18 @@ calibration of speed and current scales, the residual tests and the episode in p
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 
 import numpy as np
 
 from ftcap_hil.core.estimation.shaft_types import DiagnosisConfig, DriveModel, Hypothesis
+
+
+def _time(entry: tuple[float, float, float, float]) -> float:
+    """A history entry's time (the bisection's key)."""
+    return entry[0]
 
 
 class Cusum:
@@ -157,15 +163,17 @@ class Channel:
         hist = self.history
         if not hist:
             return 0.0, 0.0, 0.0
-        prev = hist[0]
-        for entry in hist:
-            if entry[0] >= t_s:
-                dt = entry[0] - prev[0]
-                w = 1.0 if dt <= 0.0 else (t_s - prev[0]) / dt
-                a, b, c = (p + w * (e - p) for p, e in zip(prev[1:], entry[1:], strict=True))
-                return a, b, c
-            prev = entry
-        return prev[1], prev[2], prev[3]
+        # the first entry at or after t_s (the times strictly increase: advance), and the one
+        # before it (the first itself if it is the first)
+        i = bisect.bisect_left(hist, t_s, key=_time)
+        if i == len(hist):
+            last = hist[-1]
+            return last[1], last[2], last[3]
+        entry, prev = hist[i], hist[max(i - 1, 0)]
+        dt = entry[0] - prev[0]
+        w = 1.0 if dt <= 0.0 else (t_s - prev[0]) / dt
+        a, b, c = (p + w * (e - p) for p, e in zip(prev[1:], entry[1:], strict=True))
+        return a, b, c
 
     def current_at(self, n: float) -> float:
         """The current (A) a healthy shaft at speed ``n`` draws (:class:`LoadModel`)."""

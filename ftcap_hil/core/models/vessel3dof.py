@@ -159,6 +159,9 @@ class Vessel3DOF:
 
     def damping(self, nu_r: FloatArray) -> FloatArray:
         """D(nu_r) nu_r (class docstring), shape of nu_r (N, N, N m)."""
+        if np.shape(nu_r) == (3,):  # one state: the same operations on Python floats
+            d0, d1, d2 = self._damping_one(*(float(x) for x in nu_r))
+            return np.array([-d0, -d1, -d2])
         u, v, r = nu_r[..., 0], nu_r[..., 1], nu_r[..., 2]
         au, av, ar = np.abs(u), np.abs(v), np.abs(r)
         return -np.stack(
@@ -216,12 +219,7 @@ class Vessel3DOF:
         times the arithmetic; the filter's Jacobian takes several per sample), then the one
         product with M^-T as there, so the result is the same to the last bit."""
         u, v, r = (float(x) for x in nu)
-        au, av, ar = abs(u), abs(v), abs(r)
-        d0 = (self.X_u + self.X_uu * au + self.X_uuu * u * u) * u
-        d1 = (self.Y_v + self.Y_vv * av + self.Y_rv * ar) * v
-        d1 = d1 + (self.Y_r + self.Y_vr * av + self.Y_rr * ar) * r
-        d2 = (self.N_v + self.N_vv * av + self.N_rv * ar) * v
-        d2 = d2 + (self.N_r + self.N_vr * av + self.N_rr * ar) * r
+        d0, d1, d2 = self._damping_one(u, v, r)
         n0, n1, n2 = -d0 - 0.0, -d1 - 0.0, -d2 - 0.0  # damping(nu) - feed, feed = 0.0
         if self.coriolis:
             m, mx = self.mass_kg, self.mass_kg * self.xg_m
@@ -232,6 +230,16 @@ class Vessel3DOF:
         t0, t1, t2 = (float(x) for x in tau)
         out: FloatArray = np.array([t0 - n0, t1 - n1, t2 - n2]) @ self._m_inv_t
         return out
+
+    def _damping_one(self, u: float, v: float, r: float) -> tuple[float, float, float]:
+        """-D(nu) nu of one state in Python floats, the operations of ``damping`` in order."""
+        au, av, ar = abs(u), abs(v), abs(r)
+        d0 = (self.X_u + self.X_uu * au + self.X_uuu * u * u) * u
+        d1 = (self.Y_v + self.Y_vv * av + self.Y_rv * ar) * v
+        d1 = d1 + (self.Y_r + self.Y_vr * av + self.Y_rr * ar) * r
+        d2 = (self.N_v + self.N_vv * av + self.N_rv * ar) * v
+        d2 = d2 + (self.N_r + self.N_vr * av + self.N_rr * ar) * r
+        return d0, d1, d2
 
     eta_dot = staticmethod(SurfaceVessel.eta_dot)
 

@@ -59,11 +59,11 @@ def _parse(text: str):  # noqa: ANN202
 
 
 def test_the_shipped_campaigns_parse_and_plan(tmp_path: Path) -> None:
-    assert {"smoke", "realistic"} <= set(shipped_campaigns())
-    for name in ("smoke", "realistic"):
-        plan, files = plan_campaign(load_campaign(name), tmp_path)
-        assert plan.tasks and files
-    plan, _ = plan_campaign(load_campaign("realistic"), tmp_path)
+    assert {"smoke", "realistic", "sweeps"} <= set(shipped_campaigns())
+    plan, files = plan_campaign(load_campaign("smoke"), tmp_path)
+    assert plan.tasks and files
+    plan, files = plan_campaign(load_campaign("realistic"), tmp_path)
+    assert files
     faulty = [t for t in plan.tasks if not t.healthy]
     assert len(faulty) == 375  # 3 scenarios x 5 kinds x 5 seeds x (none, cap, oracle, 2 ftcap)
     kinds = {t.variant: t.scenario.core.estimator.kind for t in faulty}

@@ -10,4 +10,4 @@ if [ "$(id -u)" = 0 ] && [ -f tests/vcan/setup.sh ] && command -v apt-get >/dev/
 fi
 PY=${PYTHON:-python}
 [ -x .venv/bin/python ] && PY=.venv/bin/python
-exec "$PY" -m pytest -p no:cacheprovider "$@"
+exec "$PY" -m pytest -p no:cacheprovider --durations=30 "$@"

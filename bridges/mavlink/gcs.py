@@ -43,7 +43,7 @@ from bridges.mavlink.codec import (
 from bridges.mavlink.commands import MavResult
 from bridges.mavlink.config import ALLOCATOR_IDS, VESSEL_IDS, MavlinkEndpoint, default_gcs_endpoint
 from bridges.mavlink.link import MavlinkPort, PortOwner, Route
-from bridges.mavlink.params import int_from_wire, int_to_wire
+from bridges.mavlink.params import int_from_either, int_to_wire
 from bridges.mavlink.peers import TrafficLimits
 from bridges.mavlink.vessel import (
     FAILURE_ENABLE_PARAM,
@@ -187,7 +187,7 @@ class MavlinkGcsLink(PortOwner):
     def _on_param_value(self, msg: Any, now_ns: int) -> None:
         value = float(msg.param_value)
         if msg.param_type == _MAV_PARAM_TYPE_INT32:
-            value = float(int_from_wire(value))
+            value = float(int_from_either(value))  # C-cast when it answers a C-cast set
         entry = (value, msg.param_type, msg.param_index, msg.param_count)
         with self._cond:
             self._params.setdefault(self._src(msg), {})[msg.param_id] = entry

@@ -199,18 +199,26 @@ class MavlinkPort:
 
     # --- sending (any thread) ---
 
-    def send(self, build: Callable[[Any], None]) -> bool:
+    def send(
+        self,
+        build: Callable[[Any], None],
+        *,
+        only: Address | None = None,
+        skip: Address | None = None,
+    ) -> bool:
         """Call ``build(mav)`` (e.g. ``lambda mav: mav.heartbeat_send(...)``) under the lock.
 
-        The frame goes to every peer of the current snapshot. Returns False, counted in
-        ``stats.send_errors``, if the port is closed, the value does not fit the wire type,
-        or a peer's datagram was refused; never raises for transport errors.
+        The frame goes to every peer of the current snapshot (to ``only`` alone, or to every
+        peer but ``skip``, when given). Returns False, counted in ``stats.send_errors``, if
+        the port is closed, the value does not fit the wire type, or a peer's datagram was
+        refused; never raises for transport errors.
         """
         with self._send_lock:
             if self._closed:
                 self.stats.send_errors += 1
                 return False
             refused = self._transport.send_errors
+            self._transport.only, self._transport.skip = only, skip
             try:
                 build(self._mav)
             except (OSError, OverflowError, ValueError, struct.error) as e:
@@ -219,6 +227,8 @@ class MavlinkPort:
                 self.stats.send_errors += 1
                 logger.debug("%s: send failed: %s", self.role, e)
                 return False
+            finally:
+                self._transport.only = self._transport.skip = None
             if self._transport.send_errors != refused:  # some peer's socket refused it
                 self.stats.send_errors += 1
                 return False
@@ -268,15 +278,13 @@ class MavlinkPort:
         return False
 
     def resolve(self, key: str, values: tuple[str, ...]) -> tuple[Address, ...]:
-        """``host:port`` strings as source addresses of this transport (a byte stream: its
-        one source); LinkConfigError naming ``key`` otherwise."""
+        """``host:port`` strings as this transport's source addresses (LinkConfigError)."""
         resolved: tuple[Address, ...] = self._transport.resolve(key, values)
         return resolved
 
     @property
     def source(self) -> Address | None:
-        """The (host, port) the message being dispatched came from (dispatch thread, inside
-        a handler; None elsewhere or on a byte stream's single source)."""
+        """The (host, port) the message being dispatched came from (in a handler; else None)."""
         return self._requester
 
     def reply(self, build: Callable[[Any], None], cost: float = 1.0) -> bool:

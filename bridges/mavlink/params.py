@@ -6,8 +6,11 @@ answers the MAVLink parameter protocol on a :class:`~bridges.mavlink.link.Mavlin
 
 * ``PARAM_REQUEST_LIST`` -> one ``PARAM_VALUE`` per parameter, in table order;
 * ``PARAM_REQUEST_READ`` -> ``PARAM_VALUE`` by index, or by name when ``param_index == -1``;
-* ``PARAM_SET`` -> ``PARAM_VALUE`` with the new value, or, if refused, with the unchanged
-  value plus a ``STATUSTEXT`` (WARNING) that says why.
+* ``PARAM_SET`` -> ``PARAM_VALUE`` with the new value, or, if refused, a ``PARAM_ERROR``
+  (MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, or _READ_ONLY for a parameter not settable while
+  running) to the requester, the unchanged ``PARAM_VALUE`` and a ``STATUSTEXT`` (WARNING)
+  that says why: a client that knows PARAM_ERROR reports the refusal, others see the value
+  did not change.
 
 Only authorized systems (:meth:`MavlinkPort.authorized`) are answered; the answers are paid
 from the requester's reply budget. Unknown names or indices get no answer (as the protocol
@@ -20,8 +23,10 @@ AUTOPILOT_VERSION (``MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE``). A ``PARAM
 integer parameter is also understood when the client C-casts the value (MAVProxy, which
 assumes ArduPilot's convention): for a parameter whose limits lie within +-2**24, the two
 readings never overlap (a C-cast integer >= 1 has float bits above 2**29; a byte-wise one is
-0 or a denormal), so the one within the limits is the one meant. Names are upper case, at
-most 16 characters (MAVLink's ``param_id``).
+0 or a denormal), so the one within the limits is the one meant; the answer to a C-cast
+set goes to its sender C-cast too (MAVProxy compares it with what it set), byte-wise to
+everyone else. A client reading an INT32 value can tell the two apart the same way
+(:func:`int_from_either`). Names are upper case, at most 16 characters (MAVLink's ``param_id``).
 
 Limits are compared in float32, the wire's precision: 0.99 sent as float32 is
 0.99000001, which is "0.99" to the sender, so it is taken as the limit itself.
@@ -66,6 +71,15 @@ def int_to_wire(value: int) -> float:
 def int_from_wire(raw: float) -> int:
     """The int32 whose bytes a byte-wise-encoded float carries."""
     return int(struct.unpack("<i", struct.pack("<f", raw))[0])
+
+
+def int_from_either(raw: float) -> int:
+    """An INT32 parameter value sent byte-wise or C-cast: the byte-wise reading when it is
+    within +-2**24, else the float itself (module docstring: the two never overlap)."""
+    bytewise = int_from_wire(raw)
+    if abs(bytewise) <= _INT_LIMIT or not math.isfinite(raw) or not float(raw).is_integer():
+        return bytewise
+    return int(raw)
 
 
 class ParamType(enum.Enum):
@@ -202,12 +216,17 @@ class ParamServer:
 def decode_set_value(spec: ParamSpec, raw: float) -> float:
     """The value a PARAM_SET means for ``spec``: float parameters as sent; integer ones
     byte-wise, or C-cast if that is the reading within the limits (module docstring)."""
+    return _decode_set(spec, raw)[0]
+
+
+def _decode_set(spec: ParamSpec, raw: float) -> tuple[float, bool]:
+    """(:func:`decode_set_value`, whether it was read C-cast)."""
     if spec.kind is not ParamType.INT:
-        return float(raw)
+        return float(raw), False
     bytewise = float(int_from_wire(raw))
     if max(spec.min, -_INT_LIMIT) <= bytewise <= min(spec.max, _INT_LIMIT):
-        return bytewise
-    return float(raw)
+        return bytewise, False
+    return float(raw), True
 
 
 class ParamService:
@@ -239,7 +258,9 @@ class ParamService:
             return int_to_wire(int(value)), dialect.MAV_PARAM_TYPE_INT32
         return value, dialect.MAV_PARAM_TYPE_REAL32
 
-    def _send_value(self, index: int, *, reply: bool = True) -> None:
+    def _send_value(self, index: int, *, reply: bool = True, c_cast_to: Any = None) -> None:
+        """PARAM_VALUE of ``index`` to every peer; with ``c_cast_to`` (an address), that one
+        gets an integer C-cast and the others byte-wise."""
         port = self._port
         if port is None:
             return
@@ -247,9 +268,14 @@ class ParamService:
         name = self.server.specs[index].name.encode("ascii")
         count = len(self.server)
 
-        def build(mav: Any) -> None:
-            mav.param_value_send(name, value, ptype, count, index)
+        def build(mav: Any, v: float = value) -> None:
+            mav.param_value_send(name, v, ptype, count, index)
 
+        if c_cast_to is not None:
+            cast = self.server.get_index(index)
+            port.send(lambda mav: build(mav, cast), only=c_cast_to)
+            port.send(build, skip=c_cast_to)
+            return
         port.reply(build) if reply else port.send(build)
 
     def _for_me(self, msg: Any) -> bool:
@@ -285,8 +311,22 @@ class ParamService:
         if index is None:
             self._port.stats.ignored += 1
             return
-        value = decode_set_value(self.server.specs[index], float(msg.param_value))
+        spec = self.server.specs[index]
+        value, c_cast = _decode_set(spec, float(msg.param_value))
         result = self.server.set(msg.param_id, value)
         if not result.accepted:
+            self._param_error(msg, index, spec)
             self._port.send_statustext(f"{msg.param_id} not set: {result.reason}", Severity.WARNING)
-        self._send_value(index, reply=False)  # the outcome of a set always goes out
+        # the outcome of a set always goes out
+        self._send_value(index, reply=False, c_cast_to=self._port.source if c_cast else None)
+
+    def _param_error(self, msg: Any, index: int, spec: ParamSpec) -> None:
+        """PARAM_ERROR for a refused set, to its sender."""
+        port = self._port
+        assert port is not None
+        d = port.dialect
+        read_only = self.server.running and not spec.settable_while_running
+        error = d.MAV_PARAM_ERROR_READ_ONLY if read_only else d.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE
+        to = (msg.get_srcSystem(), msg.get_srcComponent())
+        name = spec.name.encode("ascii")
+        port.send(lambda mav: mav.param_error_send(*to, name, index, error), only=port.source)

@@ -79,6 +79,10 @@ class UdpTransport:
         self.table = PeerTable(tuple(configured), tuple(relay_addrs), limits or TrafficLimits())
         self.send_errors = 0
         self.family = family
+        # Set by the port under its send lock for one send: only to this address, or to
+        # every peer but this one (None: every peer).
+        self.only: Address | None = None
+        self.skip: Address | None = None
 
     def resolve(self, key: str, values: Sequence[str]) -> tuple[Address, ...]:
         """``host:port`` strings as the addresses datagrams from them carry (this socket's
@@ -101,9 +105,14 @@ class UdpTransport:
         return data, (str(sockaddr[0]), int(sockaddr[1]))
 
     def write(self, buf: bytes) -> None:
-        """Send one frame to every peer of the current snapshot (pymavlink's ``file.write``)."""
+        """Send one frame to every peer of the current snapshot (pymavlink's ``file.write``),
+        or to ``only``, or to every peer but ``skip``."""
+        if self.only is not None:
+            self.send_to(buf, self.only)
+            return
         for addr in self.table.peers:
-            self.send_to(buf, addr)
+            if addr != self.skip:
+                self.send_to(buf, addr)
 
     def send_to(self, buf: bytes | bytearray, addr: Address) -> bool:
         """One datagram to ``addr``; a refusal is counted, never raised."""
@@ -127,6 +136,8 @@ class StreamTransport:
         self.conn = conn
         self.table = PeerTable((STREAM_SOURCE,))
         self.send_errors = 0
+        self.only: Address | None = None  # a stream has one far end: both are moot
+        self.skip: Address | None = None
 
     def receive(self, timeout_s: float) -> tuple[bytes, Address] | None:
         """Whatever bytes the stream has (frames may span reads), or None after a wait."""

@@ -268,8 +268,12 @@ def test_param_set_refused_echoes_unchanged_value_and_says_why(
     gcs.mav.param_set_send(SYS, COMP, name.encode(), value, ptype)
     echo = gcs.wait_for("PARAM_VALUE", lambda m: m.param_id == name)
     text = gcs.wait_for("STATUSTEXT", lambda m: m.text.startswith(name))
-    assert param_number(echo) == before
+    error = gcs.wait_for("PARAM_ERROR", lambda m: m.param_id == name)
+    assert param_number(echo) == before  # sent typed REAL32: answered byte-wise
     assert link.params.get(name) == before
+    assert error is not None and (error.target_system, error.target_component) == (255, 190)
+    expected = "READ_ONLY" if running else "VALUE_OUT_OF_RANGE"
+    assert error.error == getattr(DIALECT, f"MAV_PARAM_ERROR_{expected}")
     assert reason in text.text
     assert text.severity == DIALECT.MAV_SEVERITY_WARNING
 

@@ -107,6 +107,11 @@ def test_mavproxy_sets_allocator_params_and_injects_a_vessel_failure(system) -> 
     assert wait_until(lambda: allocator.params.get("ALLOC_W_U") == 2.5)
     mavproxy.command("param set ALLOC_HORIZON 12")
     assert wait_until(lambda: allocator.params.get("ALLOC_HORIZON") == 12)
+    # MAVProxy C-casts the integer; the echo it gets is C-cast too (issue 22, item 6: it
+    # printed "Failed to set ... (invalid returned value 1.7e-44)" and cached the tiny float)
+    mavproxy.command("param show ALLOC_HORIZON")
+    mavproxy.expect(r"ALLOC_HORIZON\s+12(\.0*)?\s*$")
+    assert not [line for line in mavproxy.transcript if "Failed to set" in line]
     mavproxy.command("param set ALLOC_W_U 50")
     mavproxy.expect(r"ALLOC_W_U not set: 50 outside \[0, 10\]")  # our STATUSTEXT
     mavproxy.command("param show ALLOC*")

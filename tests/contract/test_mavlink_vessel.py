@@ -97,7 +97,8 @@ def _inject(gcs: RawPeer, ftype: int, instance: float, value: float = NAN, comma
 
 def _enable(gcs: RawPeer) -> None:
     gcs.mav.param_set_send(SYS, COMP, FAILURE_ENABLE_PARAM.encode(), 1, 6)  # C-cast 1: accepted
-    assert gcs.wait_for("PARAM_VALUE", lambda m: param_number(m) == 1.0)
+    # answered C-cast to a C-cast set (as MAVProxy checks it; issue 22, item 6)
+    assert gcs.wait_for("PARAM_VALUE", lambda m: m.param_value == 1.0)
 
 
 def test_heartbeat_identifies_a_surface_vessel(pair) -> None:

@@ -86,9 +86,11 @@ class RawPeer:
 
 
 def param_number(msg: Any) -> float:
-    """A PARAM_VALUE's value as the components encode it: INT32 byte-wise, REAL32 as is."""
+    """A PARAM_VALUE's value as the components encode it: INT32 byte-wise (C-cast in the
+    answer to a C-cast set: the two readings never overlap below 2**24), REAL32 as is."""
     if msg.param_type == DIALECT.MAV_PARAM_TYPE_INT32:
-        return float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
+        bytewise = float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
+        return bytewise if abs(bytewise) <= 2**24 else float(msg.param_value)
     return float(msg.param_value)
 
 

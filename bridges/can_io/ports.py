@@ -125,10 +125,15 @@ class CanSender(CanPort):
             return True
 
     def _status_due(self, now_ns: int | None) -> bool:
+        """NodeStatus due at ``now_ns``: on absolute deadlines, so the rate is the period's
+        whatever the caller's tick (DroneCAN allows at most 1 s); after a stall of more than
+        a period the schedule restarts from now."""
         now = time.monotonic_ns() if now_ns is None else now_ns
-        if self._next_status_ns is not None and now < self._next_status_ns:
+        due = self._next_status_ns
+        if due is not None and now < due:
             return False
-        self._next_status_ns = now + self._period_ns
+        late = due is None or now - due >= self._period_ns
+        self._next_status_ns = (now if late else due) + self._period_ns
         return True
 
     def _uptime_s(self) -> int:

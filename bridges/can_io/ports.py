@@ -132,8 +132,8 @@ class CanSender(CanPort):
         due = self._next_status_ns
         if due is not None and now < due:
             return False
-        late = due is None or now - due >= self._period_ns
-        self._next_status_ns = (now if late else due) + self._period_ns
+        start = now if due is None or now - due >= self._period_ns else due
+        self._next_status_ns = start + self._period_ns
         return True
 
     def _uptime_s(self) -> int:

@@ -25,7 +25,6 @@ from tests.support.mavlink_peers import (
     DIALECT,
     RawPeer,
     free_udp_ports,
-    param_number,
 )
 
 pytestmark = [pytest.mark.timeout(30), pytest.mark.usefixtures("no_leaked_threads")]

@@ -208,10 +208,9 @@ class MavlinkPort:
     ) -> bool:
         """Call ``build(mav)`` (e.g. ``lambda mav: mav.heartbeat_send(...)``) under the lock.
 
-        The frame goes to every peer of the current snapshot (to ``only`` alone, or to every
-        peer but ``skip``, when given). Returns False, counted in ``stats.send_errors``, if
-        the port is closed, the value does not fit the wire type, or a peer's datagram was
-        refused; never raises for transport errors.
+        To every peer of the current snapshot (to ``only`` alone, or to all but ``skip``).
+        False, counted in ``stats.send_errors``, if the port is closed, the value does not
+        fit the wire type or a datagram was refused; never raises for transport errors.
         """
         with self._send_lock:
             if self._closed:

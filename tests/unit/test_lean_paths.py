@@ -22,6 +22,7 @@ from ftcap_hil.core.cycle import CoreConfig, FtcapCore
 from ftcap_hil.core.effectiveness.geometry import effectiveness, paper_four_thrusters
 from ftcap_hil.core.estimation.config import EstimatorConfig, wrench_scale
 from ftcap_hil.core.estimation.decisions import _best
+from ftcap_hil.core.estimation.kalman import KalmanEstimator
 from ftcap_hil.core.estimation.shaft_channel import Channel
 from ftcap_hil.core.estimation.stages import Observation
 from ftcap_hil.core.estimation.step_models import VesselStep, inv_small
@@ -145,6 +146,35 @@ def test_the_greedy_pick_is_numpys_argmax_of_the_qualifying_scores() -> None:
         expected = int(np.argmax(np.where(ok, score, -np.inf))) if ok.any() else -1
         args = (f.tolist(), root.tolist(), need.tolist(), big.tolist(), on.tolist())
         assert _best(*args) == expected
+
+
+def projected(z: np.ndarray, P: np.ndarray, ks: int, m: int) -> np.ndarray:
+    """The projection's reference arithmetic (KalmanEstimator._project as it was)."""
+    z = z.copy()
+    d = z[ks : ks + m]
+    low, high = d < 0.0, d > 1.0
+    active = np.flatnonzero(low | high)
+    if active.size:
+        rows = ks + active
+        gap = z[rows] - np.where(low[active], 0.0, 1.0)
+        z -= P[:, rows] @ np.linalg.solve(P[np.ix_(rows, rows)], gap)
+        np.clip(z[ks : ks + m], 0.0, 1.0, out=z[ks : ks + m])
+    return z
+
+
+def test_the_projection_is_the_reference_one_to_the_bit() -> None:
+    rng = np.random.default_rng(12)
+    S = wrench_scale(B, THS.u_min, THS.u_max)
+    kf = KalmanEstimator(B, S, SurfaceVessel(), EstimatorConfig(measurement_std=(1e-3,) * 3))
+    ks, m, n = 3, 4, kf.P.shape[0]
+    for k in range(1000):
+        M = rng.normal(size=(n, n))
+        kf.P = M @ M.T / n + 1e-6 * np.eye(n)
+        kf.z = rng.normal(size=n)
+        kf.z[ks : ks + m] = rng.uniform(-0.2, 1.2, size=m) if k % 3 else rng.uniform(0, 1, m)
+        expected = projected(kf.z, kf.P, ks, m)
+        kf._project()
+        assert np.array_equal(kf.z, expected)
 
 
 def cycles(core: FtcapCore, forget: bool) -> list[np.ndarray]:

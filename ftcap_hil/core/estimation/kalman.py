@@ -254,18 +254,21 @@ class KalmanEstimator:
         so the state stays consistent with the data. A plain clip here made the estimate
         drift along the unobservable directions while commands saturated."""
         ks, m = self._ks, self._m
-        d = self.z[ks : ks + m]
-        if all(0.0 <= v <= 1.0 or v != v for v in d.tolist()):
-            return  # the common case, decided in Python floats (NaN: never active)
-        low, high = d < 0.0, d > 1.0
-        active = np.flatnonzero(low | high)
-        if active.size == 0:
+        values = self.z[ks : ks + m].tolist()  # Python floats: cheaper than numpy on (m,)
+        active = [i for i, v in enumerate(values) if v < 0.0 or v > 1.0]  # NaN: never
+        if not active:
             return
-        rows = ks + active
-        target = np.where(low[active], 0.0, 1.0)
-        PD = self.P[:, rows]  # P D^T
-        gap = self.z[rows] - target
-        self.z -= PD @ np.linalg.solve(self.P[np.ix_(rows, rows)], gap)
+        targets = [0.0 if values[i] < 0.0 else 1.0 for i in active]
+        rows = [ks + i for i in active]
+        if len(rows) == 1 and self.P[rows[0], rows[0]] != 0.0:
+            # one bound active (the common case): solve and product are one division and
+            # one column scaled, as numpy's 1 x 1 solve and (n, 1) @ (1,) compute them
+            r = rows[0]
+            self.z -= self.P[:, r] * ((self.z[r] - targets[0]) / self.P[r, r])
+        else:
+            PD = self.P[:, rows]  # P D^T
+            gap = self.z[rows] - np.array(targets)
+            self.z -= PD @ np.linalg.solve(self.P[np.ix_(rows, rows)], gap)
         np.clip(self.z[ks : ks + m], 0.0, 1.0, out=self.z[ks : ks + m])  # rounding only
 
     def _predict(self, u: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:

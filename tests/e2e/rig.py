@@ -152,6 +152,7 @@ class Rig:
             f'can.channel="{self.hub_channel}"',
             f'mavlink.connection="udpin:127.0.0.1:{self.alloc_port}"',
             f'mavlink.peers=["127.0.0.1:{self.gcs_port}"]',
+            f'mavlink.telemetry_from=["127.0.0.1:{self.vessel_port}"]',  # the vessel's inbox
             f"zenoh.overrides=['listen/endpoints:[\"tcp/127.0.0.1:{self.zenoh_port}\"]']",
         ]
         args = [*(["-vv"] if verbose else []), "allocator"]

@@ -296,6 +296,8 @@ def start_peers(
             *can, "zenoh.enabled=false", *ALLOCATOR_SETTINGS,
             f'mavlink.connection="udpin:127.0.0.1:{alloc_port}"',
             f'mavlink.peers=["127.0.0.1:{gcs_port}"]',
+            # ODOMETRY is believed only from the vessel's inbox (docs/security.md)
+            f'mavlink.telemetry_from=["127.0.0.1:{vessel_port}"]',
         ])),
         out / "allocator.log",
     )  # fmt: skip

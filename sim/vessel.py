@@ -48,7 +48,14 @@ import numpy as np
 
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.faults import FaultSchedule, Truth
-from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, FaultKind, FloatArray
+from ftcap_hil.core.messages import (
+    BoolArray,
+    EscStatus,
+    FaultInjection,
+    FaultKind,
+    FloatArray,
+    Odometry,
+)
 from ftcap_hil.core.models.plants import SurfaceVessel, wrap_angle
 from sim.esc_model import DEFAULT_ESC, EscModel
 
@@ -68,7 +75,7 @@ class VesselSimConfig:
     watchdog (s, on the caller's clock), true faults (schedule and silent ESC windows), the
     ESC telemetry model, the defaults of value-less injections and the RK4 substeps."""
 
-    plant: SurfaceVessel
+    plant: SurfaceVessel | None  # None: another truth steps the state (sim/live_truth.py)
     thrusters: ThrusterSet
     B: FloatArray  # (3, m)
     x0: FloatArray = field(default_factory=lambda: np.zeros(6))  # [north, east, psi, u, v, r]
@@ -227,24 +234,39 @@ class VesselSim:
         last = self._last_now_s
         if fresh and last is not None and last < self._command_stamp_s < now_s:
             before = (self._command_stamp_s - last) / (now_s - last)
-        plant, substeps, B = self.config.plant, self.config.rk4_substeps, self.config.B
         prev = self._acting
         produced_sum = np.zeros(self.m)
+        t0 = self._t_s
         for at_s, frac, new_command in self._parts(dt_s, before):
             truth = self._truth_at(at_s)
-            produced = truth.delta * (u if new_command else prev) + truth.f
-            self._x = plant.step_rk4(self._x, B @ produced, frac * dt_s, substeps)
+            produced = self._integrate(truth, u if new_command else prev, frac * dt_s)
             produced_sum += frac * produced
         self._x[2] = float(wrap_angle(self._x[2]))  # psi in (-pi, pi], as telemetry reports it
-        self._t_s += dt_s
+        self._t_s = t0 + dt_s
         self._produced = produced
         self._responding = truth.delta > 0.0
         self._acting = u
         self._last_now_s = now_s
+        shown = self._recorded(truth)
         return SimSample(
-            self._t_s, self._x.copy(), u, fresh, age, produced_sum, B @ produced_sum,
-            truth.delta, truth.f, silent,
+            self._t_s, self._x.copy(), u, fresh, age, produced_sum, self.config.B @ produced_sum,
+            shown.delta, shown.f, silent,
         )  # fmt: skip
+
+    def _integrate(self, truth: Truth, u: FloatArray, h_s: float) -> FloatArray:
+        """Advance the state by ``h_s`` under ``truth`` with the command ``u`` (m,) N held;
+        the mean force each thruster produced over it (m,) N. The paper's plant:
+        F = delta u + f, RK4 (a subclass steps another truth)."""
+        plant = self.config.plant
+        if plant is None:
+            raise ValueError("VesselSim: the paper's plant is needed (config.plant is None)")
+        produced: FloatArray = truth.delta * u + truth.f
+        self._x = plant.step_rk4(self._x, self.config.B @ produced, h_s, self.config.rk4_substeps)
+        return produced
+
+    def _recorded(self, truth: Truth) -> Truth:
+        """The faults a sample reports for the step's last part (as seen from the command)."""
+        return truth
 
     def _parts(self, dt_s: float, before: float) -> list[tuple[float, float, bool]]:
         """The step [t, t + dt_s] cut where the latest command arrived (``before``, a fraction
@@ -269,6 +291,22 @@ class VesselSim:
     def esc_statuses(self) -> list[EscStatus]:
         """Telemetry of the last step's produced forces, for the ESCs that are not silent."""
         return self.config.esc.statuses(self._produced, self._responding, ~self.silent())
+
+    # --- what the shell publishes after a step ---
+
+    def odometry(self, sample: SimSample, due: bool) -> list[Odometry]:
+        """The odometry to publish after the step that gave ``sample``: the exact state when
+        the shell's telemetry stream is ``due`` (a truth with a sensor: what it delivered)."""
+        return [Odometry.checked(sample.x[:3], sample.x[3:], sample.t_s)] if due else []
+
+    def reporting(self) -> BoolArray:
+        """(m,) ESCs whose telemetry is on now (not silent)."""
+        return ~self.silent()
+
+    def esc_reports(self, due: bool) -> list[EscStatus] | None:
+        """The ESC telemetry to send now (None: nothing this step): the ESC model's statuses
+        of the produced forces when the shell's ESC stream is ``due``."""
+        return self.esc_statuses() if due else None
 
 
 # --- helpers of the process shell (pure) ---

@@ -24,7 +24,11 @@ log = logging.getLogger(__name__)
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, help="vessel TOML (default: the shipped vessel.toml)")
-    p.add_argument("--scenario", help="take the true faults from this scenario (file or name)")
+    p.add_argument(
+        "--scenario",
+        help="a scenario (file or name): a realistic one is the truth (vessel, environment, "
+        "drives, sensor, faults); a plain one gives the true faults",
+    )
     add_set_option(p, "config", "sim.silent_thrusters=[2]")
     p.add_argument("--duration", type=float, help="stop after this many seconds of sim time")
     p.add_argument("--record", type=Path, help="write the true state and faults to this CSV")
@@ -37,7 +41,10 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--duration: expected a positive number of seconds, got {args.duration}")
     cfg = load_config(args.config, args.set, args.scenario)
     with contextlib.ExitStack() as stack:
-        ports = VesselPorts.open(cfg.ports, cfg.sim.thrusters, cfg.shell.fault_injection_enabled)
+        shell = cfg.shell
+        ports = VesselPorts.open(
+            cfg.ports, cfg.sim.thrusters, shell.fault_injection_enabled, shell.hold
+        )
         stack.callback(ports.shutdown)
         recorder = None
         if args.record is not None:
@@ -46,5 +53,10 @@ def run(args: argparse.Namespace) -> int:
             except OSError as e:
                 raise ConfigError(f"--record: cannot write {args.record}: {e}") from e
             recorder = Recorder(fh, cfg.sim.thrusters)
-        log.info("simulated vessel running (%s), %d thrusters", cfg.source, cfg.sim.thrusters.m)
+        truth = "the paper's plant" if cfg.scenario is None else f"scenario {cfg.scenario.name}"
+        log.info(
+            "simulated vessel running (%s), %s, %d thrusters, %g x real time%s",
+            cfg.source, truth, cfg.sim.thrusters.m, shell.realtime_factor,
+            ", held at t = 0 until SIM_HOLD = 0" if shell.hold else "",
+        )  # fmt: skip
         return VesselProcess(cfg, ports, recorder, args.duration).run()

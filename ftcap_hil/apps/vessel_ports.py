@@ -20,15 +20,18 @@ from ftcap_hil.core.errors import ConfigError, PortError
 from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, Odometry, ThrusterCommand
 from ftcap_hil.ports.mailbox import Stamped
 
+HOLD_PARAM = "SIM_HOLD"  # the vessel's parameter: 1 waits at sim time 0 (sim.hold)
+
 
 class VesselPorts:
     """CAN (commands in, ESC telemetry out), MAVLink and Zenoh (odometry out, faults in):
     the loop's :class:`~ftcap_hil.runtime.vessel_process.VesselIO`. ``shutdown()`` closes
     everything opened, in reverse."""
 
-    def __init__(self, injection_enabled: bool) -> None:
+    def __init__(self, injection_enabled: bool, hold: bool = False) -> None:
         self._stack = contextlib.ExitStack()
         self._injection_enabled = injection_enabled
+        self._hold = hold
         self.commands: Any = None  # Mailbox[ThrusterCommand] of the CanCommandSource
         self.changes: Any = None  # its changes only (stamped at a value's first arrival)
         self.esc_sink: Any = None
@@ -36,9 +39,15 @@ class VesselPorts:
         self.zenoh: Any = None
 
     @classmethod
-    def open(cls, settings: PortSettings, ths: ThrusterSet, injection_enabled: bool) -> VesselPorts:
-        """Open every port of ``settings`` (validated by ``config.bridges``) or none."""
-        ports = cls(injection_enabled)
+    def open(
+        cls, settings: PortSettings, ths: ThrusterSet, injection_enabled: bool, hold: bool = False
+    ) -> VesselPorts:
+        """Open every port of ``settings`` (validated by ``config.bridges``) or none;
+        ``hold``: the vessel waits at t = 0 until its parameter SIM_HOLD is set to 0 (needs
+        MAVLink)."""
+        if hold and settings.mavlink is None:
+            raise ConfigError("sim.hold = true needs [mavlink]: SIM_HOLD releases the vessel")
+        ports = cls(injection_enabled, hold)
         try:
             ports._open_can(settings.can, ths)
             if settings.mavlink is not None:
@@ -79,10 +88,15 @@ class VesselPorts:
         self.commands, self.changes = source.commands, source.changes
 
     def _open_mavlink(self, c: MavlinkSettings, m: int) -> None:
+        from bridges.mavlink.params import ParamSpec, ParamType
         from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
 
+        hold = ParamSpec(
+            HOLD_PARAM, int(self._hold), ParamType.INT, 0, 1,
+            description="1: the vessel waits at sim time 0 (0 starts it)",
+        )  # fmt: skip
         try:
-            self.mavlink = MavlinkVesselLink(m, c.endpoint)
+            self.mavlink = MavlinkVesselLink(m, c.endpoint, extra_params=[hold])
         except ConfigError as e:  # the endpoint cannot be opened (port taken, bad device)
             raise PortError(f"mavlink: {e}") from e
         self._stack.callback(self.mavlink.shutdown)
@@ -124,6 +138,10 @@ class VesselPorts:
         if self.mavlink is not None:
             return bool(self.mavlink.fault_injection_enabled)
         return self._injection_enabled
+
+    def held(self) -> bool:
+        """SIM_HOLD is 1 (the vessel waits at t = 0); False without MAVLink."""
+        return self.mavlink is not None and self.mavlink.params.get(HOLD_PARAM) == 1
 
     def send_odometry(self, odom: Odometry) -> None:
         if self.mavlink is not None:

@@ -7,11 +7,12 @@ A key left out takes the default of :class:`ShellSettings`, of the truth model's
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ftcap_hil.config.bridges import PortSettings, vessel_ports_from
+from ftcap_hil.config.live_scenario import fit_node_ids
 from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.config.table_dataclass import defaults_of
 from ftcap_hil.config.tables import Table
@@ -22,7 +23,9 @@ from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import FaultSchedule
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.plants import SurfaceVessel
+from ftcap_hil.core.scenario import Scenario
 from sim.esc_model import DEFAULT_ESC, EscModel
+from sim.truth import TruthConfig
 from sim.vessel import SilentWindow, VesselSimConfig
 
 
@@ -35,6 +38,7 @@ class ShellSettings:
     esc_status_rate_hz: float = 10.0
     realtime_factor: float = 1.0  # sim seconds per wall second
     fault_injection_enabled: bool = False  # SYS_FAILURE_EN at start-up
+    hold: bool = False  # at t = 0 until released (SIM_HOLD = 0, by the ground station)
 
 
 @dataclass(frozen=True)
@@ -47,6 +51,8 @@ class VesselConfig:
     raw: dict[str, Any]  # the merged TOML
     source: str
     ports: PortSettings
+    truth: TruthConfig | None = None  # a realistic scenario's truth (None: the paper plant)
+    scenario: Scenario | None = None  # that scenario
 
 
 def silent_windows(sim: Table, m: int) -> tuple[SilentWindow, ...]:
@@ -87,6 +93,7 @@ def shell_settings_from(sim: Table) -> ShellSettings:
         rate("esc_status_rate_hz"),
         rate("realtime_factor"),
         sim.boolean("fault_injection_enabled", d["fault_injection_enabled"]),
+        sim.boolean("hold", d["hold"]),
     )
 
 
@@ -114,17 +121,33 @@ def sim_config_from(
     )
 
 
-def _schedule(sim: Table, scenario: str | None, m: int) -> FaultSchedule | None:
+def _scenario(sim: Table, scenario: str | None) -> Scenario | None:
+    """``--scenario`` (or ``sim.scenario``) read, or None."""
     name = sim.string("scenario", None)
     if scenario is None and name is None:
         return None
     try:
-        schedule = load_scenario(scenario or str(name)).faults
+        return load_scenario(scenario or str(name))
     except ConfigError as e:
         raise (e if scenario else sim.error("scenario", str(e))) from e
-    if schedule.m != m:
-        raise ConfigError(f"scenario {scenario or name!r}: {schedule.m} thrusters, vessel has {m}")
-    return schedule
+
+
+def _schedule(sc: Scenario | None, m: int) -> FaultSchedule | None:
+    if sc is None:
+        return None
+    if sc.faults.m != m:
+        raise ConfigError(f"scenario {sc.name!r}: {sc.faults.m} thrusters, vessel has {m}")
+    return sc.faults
+
+
+def _realistic(sim: VesselSimConfig, sc: Scenario) -> VesselSimConfig:
+    """The sim's config around a realistic scenario's truth: its thrusters (names and
+    limits, as the CAN commands are scaled), its true B, initial state and faults."""
+    assert sc.truth is not None
+    return replace(
+        sim, plant=None, thrusters=sc.thrusters, B=sc.truth.B, x0=sc.x0.astype(float),
+        schedule=sc.faults, silent=tuple(w for w in sim.silent if w.thruster < sc.thrusters.m),
+    )  # fmt: skip
 
 
 def load_config(
@@ -133,14 +156,21 @@ def load_config(
     """TOML file (shipped ``vessel.toml`` if None) + overrides; ConfigError names the key.
 
     ``scenario`` (or ``sim.scenario``): a scenario file or shipped name whose [[fault]]
-    schedule gives the true faults by sim time; its plant and thrusters are not used.
+    schedule gives the true faults by sim time. A plain scenario's plant and thrusters are
+    not used; a realistic one's truth replaces the file's vessel (``truth``,
+    :mod:`ftcap_hil.config.live_scenario`).
     """
     doc = read_toml(path if path is not None else "vessel", HIL_DATA, overrides, "config")
     with Table.document(doc) as root:
         plant, ths, B = surface_vessel_from(root, "the simulator")
         sim_t = root.table("sim")
-        schedule = _schedule(sim_t, scenario, ths.m)
+        sc = _scenario(sim_t, scenario)
+        live = sc if sc is not None and sc.truth is not None else None
         shell = shell_settings_from(sim_t)
-        sim = sim_config_from(root, plant, ths, B, schedule)
-        ports = vessel_ports_from(root, ths.m)
-    return VesselConfig(shell, sim, doc.data, doc.source, ports)
+        sim = sim_config_from(root, plant, ths, B, None if live else _schedule(sc, ths.m))
+        if live is not None:
+            sim = _realistic(sim, live)
+            fit_node_ids(doc.data, live.thrusters.m, doc.source)
+        ports = vessel_ports_from(root, sim.thrusters.m)
+    truth = None if live is None else live.truth
+    return VesselConfig(shell, sim, doc.data, doc.source, ports, truth, live)

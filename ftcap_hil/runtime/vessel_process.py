@@ -14,6 +14,14 @@ keeps real time as a boat does when its computer is busy, sim time stays on the 
 nominal steps, and each command is weighted by the time it really acted, as the allocator
 weights it (docs/decisions.md).
 
+With a realistic scenario (``--scenario``, ``config.sim.VesselConfig.truth``) the step
+integrates the scenario's truth (:class:`~sim.live_truth.TruthVesselSim`: environment,
+thruster bank, drives) with its fault schedule on sim time; odometry is what its sensor
+delivers (its own rate, noise, delay) and esc.Status what its drives report, as delivered.
+With ``sim.hold`` the vessel stays at its initial state and sim time 0, publishing that
+state, until released (MAVLink parameter SIM_HOLD = 0: the ground station's start), so that
+sim time and the scenario's schedule start with the mission.
+
 Odometry carries the sim time in ``Odometry.time_s``. Configuration: the shipped
 ``ftcap_hil/data/hil/vessel.toml`` (or ``--config``) plus ``--set SECTION.KEY=VALUE``.
 SIGINT/SIGTERM end the run cleanly (exit 0); a second one ends it at once (exit 130).
@@ -38,6 +46,7 @@ from ftcap_hil.ports.mailbox import Stamped
 from ftcap_hil.ports.transitions import TransitionLog, log_to
 from ftcap_hil.runtime.loop import DeadlineLoop
 from ftcap_hil.runtime.signals import capture_signals
+from sim.live_truth import TruthVesselSim
 from sim.vessel import (
     Decimator,
     SimSample,
@@ -83,6 +92,10 @@ class VesselIO(Protocol):
         """SYS_FAILURE_EN: whether the other sources' injections are carried out."""
         ...
 
+    def held(self) -> bool:
+        """SIM_HOLD: whether the vessel is asked to wait at t = 0 (``sim.hold``)."""
+        ...
+
     def send_odometry(self, odom: Odometry) -> None: ...
     def send_esc(self, statuses: list[EscStatus], reporting: BoolArray, now_ns: int) -> None: ...
 
@@ -102,12 +115,15 @@ class VesselProcess:
         duration_s: float | None = None,
     ) -> None:
         self.cfg = cfg
+        self.dt_s = cfg.shell.realtime_factor / cfg.shell.rate_hz
         self.sim = VesselSim(cfg.sim)
+        if cfg.truth is not None:
+            self.sim = TruthVesselSim(cfg.sim, cfg.truth, self.dt_s)
         self.ports = ports
         self.recorder = recorder
         self.duration_s = duration_s
         self.period_ns = int(1e9 / cfg.shell.rate_hz)
-        self.dt_s = cfg.shell.realtime_factor / cfg.shell.rate_hz
+        self._holding = cfg.shell.hold
         self.loop = DeadlineLoop(self.period_ns)
         self.steps = 0
         self.lost_s = 0.0  # sim time not integrated: stalls longer than MAX_CATCH_UP_STEPS
@@ -138,7 +154,13 @@ class VesselProcess:
     def _done(self) -> bool:
         return self.duration_s is not None and self.sim.t_s >= self.duration_s - 1e-9
 
-    def step(self, now_ns: int) -> SimSample:
+    def step(self, now_ns: int) -> SimSample | None:
+        """One step at ``now_ns`` (module docstring); None while held at t = 0."""
+        if self._held():
+            if self._telemetry.due():
+                x0 = self.cfg.sim.x0
+                self.ports.send_odometry(Odometry.checked(x0[:3], x0[3:], 0.0))
+            return None
         slot = self.ports.latest_command()
         if slot is not None and slot.stamp_ns != self._command_stamp:
             self._command_stamp = slot.stamp_ns
@@ -149,14 +171,24 @@ class VesselProcess:
         sample = self.sim.step(self._elapsed_s(now_ns), now_ns * 1e-9)
         self.steps += 1
         self._log_transitions(sample)
-        if self._telemetry.due():
-            odom = Odometry.checked(sample.x[:3], sample.x[3:], sample.t_s)
+        odometry = self.sim.odometry(sample, self._telemetry.due())
+        for odom in odometry:
             self.ports.send_odometry(odom)
-            if self.recorder is not None:
-                self.recorder.write(sample, now_ns * 1e-9)
-        if self._esc.due():
-            self.ports.send_esc(self.sim.esc_statuses(), ~sample.silent, now_ns)
+        if odometry and self.recorder is not None:
+            self.recorder.write(sample, now_ns * 1e-9)
+        statuses = self.sim.esc_reports(self._esc.due())
+        if statuses is not None:
+            self.ports.send_esc(statuses, self.sim.reporting(), now_ns)
         return sample
+
+    def _held(self) -> bool:
+        """Whether the vessel still waits at t = 0 (``sim.hold`` until the ports say it is
+        released); logged once when it starts."""
+        if self._holding and not self.ports.held():
+            self._holding = False
+            self._last_step_ns = None  # the first step after the hold is one nominal step
+            log.info("released: sim time starts")
+        return self._holding
 
     def _elapsed_s(self, now_ns: int) -> float:
         """Sim seconds for this step (module docstring): as many nominal steps as periods

@@ -17,8 +17,10 @@ from ftcap_hil.apps.allocator_ports import build_ports
 from ftcap_hil.apps.options import add_set_option
 from ftcap_hil.config.daemon import LoadedConfig, load_daemon_config
 from ftcap_hil.core.errors import ConfigError, FtcapError, PortError
+from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.command_log import CommandLog
 from ftcap_hil.runtime.daemon import AllocatorDaemon
+from ftcap_hil.runtime.drive_evidence import diagnosis_line
 from ftcap_hil.runtime.param_sync import ParamSync
 
 log = logging.getLogger(__name__)
@@ -26,6 +28,11 @@ log = logging.getLogger(__name__)
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, help="daemon TOML (default: shipped allocator.toml)")
+    p.add_argument(
+        "--scenario",
+        help="a realistic scenario (file or name): the vessel, its drives, sensor and sea as "
+        "the offline simulator tells the allocator, in place of the file's [vessel] and [plant]",
+    )
     add_set_option(p, "config", "daemon.rate_hz=10")
     p.add_argument("--duration", type=float, help="stop after this many seconds")
     p.add_argument(
@@ -60,7 +67,7 @@ def wire(
 
 def _load(args: argparse.Namespace) -> LoadedConfig:
     try:
-        return load_daemon_config(args.config, args.set)
+        return load_daemon_config(args.config, args.set, getattr(args, "scenario", None))
     except FtcapError:
         raise
     except ValueError as e:
@@ -79,6 +86,17 @@ def _log_summary(daemon: AllocatorDaemon) -> None:
         daemon.malformed,
         daemon.sampler.gate.rejected,
     )
+
+
+def _judged_by(cfg: LoadedConfig, daemon: AllocatorDaemon) -> str:
+    """How the thrusters are judged, and why not by their drives if not."""
+    c = cfg.daemon
+    why = (
+        f"mode {c.core.mode.value} has no estimation"
+        if c.core.mode is not Mode.FTCAP
+        else "[diagnosis] enabled = false"
+    )
+    return diagnosis_line(c.drives, daemon.drive.diagnosing, daemon.ports.esc_reports, why)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -102,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
             len(daemon.ports.telemetry),
             len(daemon.ports.untrusted_telemetry),
         )
+        log.info("allocator: %s", _judged_by(cfg, daemon))
         try:
             return daemon.run()
         finally:

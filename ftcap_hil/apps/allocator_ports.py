@@ -22,6 +22,7 @@ from ftcap_hil.config.daemon import DaemonConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.messages import EscStatus
 from ftcap_hil.core.status import AllocatorStatus, Severity
+from ftcap_hil.ports.mailbox import EventQueue
 from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
 from ftcap_hil.runtime.daemon import Ports
 from ftcap_hil.runtime.telemetry_guard import OdometryMailbox
@@ -105,6 +106,17 @@ def _latest_of(esc: Any) -> Callable[[], list[EscStatus | None]]:
     return latest
 
 
+def _every_status(esc: Any, wanted: bool) -> EventQueue[EscStatus] | None:
+    """Every ``esc.Status`` of a ``CanEscStatusSource`` with its receipt stamp, for the
+    drives' diagnosis (None: no source, or no drive data sheets to judge them by)."""
+    if esc is None or not wanted:
+        return None
+    queue: EventQueue[EscStatus] = EventQueue("esc-status", maxlen=64 * len(esc.mailboxes))
+    for box in esc.mailboxes:
+        box.history = queue
+    return queue
+
+
 def build_ports(
     cfg: AllocatorSettings,
     stack: contextlib.ExitStack,
@@ -123,6 +135,7 @@ def build_ports(
         esc_ages=esc.ages_s if esc is not None else None,
         esc_latest=_latest_of(esc) if esc is not None else None,
         bus_conflict=lambda now_ns: bool(server.in_conflict(node_id, now_ns)),
+        esc_reports=_every_status(esc, cfg.daemon.drives is not None),
     )
     params = open_mavlink(cfg, stack, ports)
     open_zenoh(cfg, stack, ports)

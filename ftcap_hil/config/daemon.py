@@ -15,6 +15,8 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from ftcap_hil.config.bridges import PortSettings, allocator_ports_from
+from ftcap_hil.config.live_scenario import fit_node_ids
+from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.config.scenario_tables import core_config_from
 from ftcap_hil.config.table_dataclass import defaults_of
 from ftcap_hil.config.tables import Table
@@ -23,8 +25,12 @@ from ftcap_hil.config.toml import HIL_DATA, read_toml
 from ftcap_hil.config.vessel import surface_vessel_from
 from ftcap_hil.core.cycle import CoreConfig
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet
+from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.estimation.shaft_types import DriveModel
 from ftcap_hil.core.messages import FloatArray
 from ftcap_hil.core.models.plants import SurfaceVessel
+from ftcap_hil.core.models.vessel3dof import PlantModel
+from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 
 
@@ -55,7 +61,7 @@ class DaemonConfig:
 
     thrusters: ThrusterSet
     B: FloatArray
-    plant: SurfaceVessel
+    plant: SurfaceVessel | PlantModel
     core: CoreConfig
     rate_hz: float = 1.0 / T_S
     estimation_period_s: float = T_S  # one estimator sample per T_s of telemetry
@@ -73,6 +79,12 @@ class DaemonConfig:
     # thruster is allocated as dead until it turns again (0: off)
     esc_stall_rpm: float = 50.0
     esc_stall_s: float = 1.0
+    # the drives' data sheets (a realistic --scenario's): the core's shaft diagnosis judges
+    # each thruster by its esc.Status rpm and current (None: no diagnosis, the stall rule)
+    drives: tuple[DriveModel, ...] | None = None
+    # sim seconds per wall second of the vessel this allocator serves (sim.realtime_factor):
+    # the core's periods and its drives' clock run that much faster than the wall clock
+    time_scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -114,6 +126,7 @@ def daemon_config_from(root: Table) -> DaemonConfig:
         odometry_limits=_odometry_limits(d),
         esc_stall_rpm=d.number("esc_stall_rpm", base["esc_stall_rpm"], lo=0.0),
         esc_stall_s=positive("esc_stall_s"),
+        time_scale=positive("time_scale"),
     )
 
 
@@ -128,12 +141,46 @@ def _odometry_limits(d: Table) -> OdometryLimits:
 HOLD_PERIODS = 2.5  # the ESC stream's hold, at least, in the daemon's deadline periods
 
 
-def load_daemon_config(path: str | Path | None, overrides: list[str] | None = None) -> LoadedConfig:
+def told_by_scenario(daemon: DaemonConfig, sc: Scenario, given: dict[str, Any]) -> DaemonConfig:
+    """The daemon told what the offline simulator tells its core of a realistic scenario
+    (``config.realistic``: geometry and limits with the stated mismatch, the allocator's
+    plant, the estimator with the sensor's data-sheet noise, the thrusters' lag and the
+    sea-state model, the drives' data sheets), in the file's mode; the loop at the
+    scenario's period and estimation period (times ``time_scale``) unless ``[daemon]``
+    (``given``) sets them."""
+    if sc.truth is None:
+        raise ConfigError(
+            f"--scenario {sc.name}: not a realistic scenario ([plant] kind = 'preset'): the "
+            "allocator takes the vessel of its own file"
+        )
+    k = daemon.time_scale
+    period = sc.estimation_period_s or sc.dt_s
+    return replace(
+        daemon,
+        thrusters=sc.thrusters,
+        B=sc.B,
+        plant=sc.plant,
+        core=replace(sc.core, mode=daemon.core.mode),
+        rate_hz=given.get("rate_hz", k / sc.dt_s),
+        estimation_period_s=given.get("estimation_period_s", period),
+        drives=sc.drives,
+    )
+
+
+def load_daemon_config(
+    path: str | Path | None, overrides: list[str] | None = None, scenario: str | None = None
+) -> LoadedConfig:
     """A TOML file (or the shipped ``allocator.toml`` when path is None) plus overrides;
-    every table and key checked (an unknown one is a ConfigError naming file, table, key)."""
+    every table and key checked (an unknown one is a ConfigError naming file, table, key).
+    ``scenario``: a realistic scenario (file or shipped name) the daemon is told about in
+    place of the file's vessel (:func:`told_by_scenario`)."""
     doc = read_toml(path if path is not None else "allocator", HIL_DATA, overrides, "config")
+    sc = None if scenario is None else load_scenario(scenario)
     with Table.document(doc) as root:
         daemon = daemon_config_from(root)
+        if sc is not None:
+            daemon = told_by_scenario(daemon, sc, dict(doc.data.get("daemon", {})))
+            fit_node_ids(doc.data, daemon.thrusters.m, doc.source)
         ports = allocator_ports_from(root, daemon.thrusters.m)
     # A hold shorter than the loop's deadline period would zero the thrusters between
     # every two cycles: it lasts at least HOLD_PERIODS of them.

@@ -42,14 +42,18 @@ class Mailbox(Generic[T]):
     malformed: int = 0
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     notify: threading.Event | None = None  # set on every put: wakes the loop early
+    # every value put also goes here (a loop that needs each sample, not only the latest)
+    history: EventQueue[T] | None = None
 
     def put(self, value: T, stamp_ns: int | None = None) -> None:
         """Replace the latest value (stamped now unless ``stamp_ns`` is given); sets
-        ``notify``."""
+        ``notify``; appends to ``history``."""
         stamped = Stamped(value, time.monotonic_ns() if stamp_ns is None else stamp_ns)
         with self._lock:
             self._slot = stamped
             self.received += 1
+        if self.history is not None:
+            self.history.put(value, stamped.stamp_ns)
         if self.notify is not None:
             self.notify.set()
 

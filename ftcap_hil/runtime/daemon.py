@@ -14,12 +14,13 @@ work, not up to a period; the deadlines keep their phase). Each cycle:
 Watchdogs: no setpoint for ``setpoint_timeout_s`` -> zero thrust; telemetry older than
 ``telemetry_timeout_s`` -> estimation frozen, allocation continues; an ESC silent for
 ``esc_timeout_s`` -> that thruster allocated as failed (the waiting/failed policy in
-:mod:`ftcap_hil.runtime.esc_watchdog`). The first SIGINT/SIGTERM ends the loop after its
-cycle, a second one forces the exit (:mod:`ftcap_hil.runtime.signals`); either way the last
-command is zero. The parts, each tested on its own: the ESC watchdog, the estimation sampler
-(:mod:`~ftcap_hil.runtime.estimation`), status assembly and announcements
-(:mod:`~ftcap_hil.runtime.status_report`), the call queue (:mod:`~ftcap_hil.runtime.calls`),
-the latency record (:mod:`~ftcap_hil.runtime.latency`).
+:mod:`ftcap_hil.runtime.esc_watchdog`), unless the drives' data sheets are known: then
+every esc.Status goes to the core's shaft diagnosis (:mod:`~ftcap_hil.runtime.drive_evidence`).
+The first SIGINT/SIGTERM ends the loop after its cycle, a second one forces the exit
+(:mod:`ftcap_hil.runtime.signals`); either way the last command is zero. The parts, each
+tested on its own: the ESC watchdog, the estimation sampler (:mod:`~.estimation`), status
+assembly and announcements (:mod:`~.status_report`), the call queue (:mod:`~.calls`), the
+latency record (:mod:`~.latency`).
 """
 
 from __future__ import annotations
@@ -36,11 +37,12 @@ from ftcap_hil.config.daemon import DaemonConfig
 from ftcap_hil.core.cycle import CoreConfig, CycleResult, FtcapCore
 from ftcap_hil.core.errors import MalformedMessage
 from ftcap_hil.core.evidence import Evidence
-from ftcap_hil.core.messages import BoolArray, EscStatus, FloatArray, Odometry, WrenchSetpoint
+from ftcap_hil.core.messages import EscStatus, FloatArray, Odometry, WrenchSetpoint
 from ftcap_hil.core.status import AllocatorStatus, Mode, Severity
 from ftcap_hil.ports.mailbox import EventQueue, Mailbox
 from ftcap_hil.ports.transitions import TransitionLog, log_to
 from ftcap_hil.runtime.calls import PendingCalls
+from ftcap_hil.runtime.drive_evidence import DriveEvidence
 from ftcap_hil.runtime.esc_watchdog import BusGuard, EscStallMonitor, EscWatchdog
 from ftcap_hil.runtime.estimation import EstimationSampler
 from ftcap_hil.runtime.latency import LatencyStats
@@ -96,6 +98,7 @@ class Ports:
     modes: list[EventQueue[Mode]] = field(default_factory=list)  # mode requests (ROS 2 topic)
     untrusted_telemetry: list[Mailbox[Odometry]] = field(default_factory=list)
     bus_conflict: Callable[[int], bool] | None = None  # now_ns -> our CAN node ID in conflict
+    esc_reports: EventQueue[EscStatus] | None = None  # every esc.Status, with its receipt
 
     def malformed(self) -> int:
         """Malformed inputs dropped so far on every setpoint and telemetry port."""
@@ -142,6 +145,7 @@ class AllocatorDaemon:
         self.esc_stall = EscStallMonitor(
             self.transitions, self.core.u_range, config.esc_stall_rpm, config.esc_stall_s
         )
+        self.drive = self._drive_evidence()
         self.sampler = EstimationSampler(
             config.estimation_period_s, config.vessel_clock, config.odometry_limits
         )
@@ -167,8 +171,15 @@ class AllocatorDaemon:
         self._tau_d = np.zeros(config.B.shape[0])
 
     def _make_core(self, core_cfg: CoreConfig) -> FtcapCore:
-        dt = 1.0 / self.config.rate_hz
-        return FtcapCore(self.config.B, self.config.thrusters, dt, core_cfg, self.config.plant)
+        cfg = self.config
+        dt = cfg.time_scale / cfg.rate_hz  # the period in the vessel's (sim) seconds
+        return FtcapCore(cfg.B, cfg.thrusters, dt, core_cfg, cfg.plant, cfg.drives)
+
+    def _drive_evidence(self) -> DriveEvidence:
+        """The ESC telemetry's path to the core (the drives' diagnosis if the core has one)."""
+        drives = self.config.drives if self.core.shaft is not None else None
+        esc = self.ports.esc_reports
+        return DriveEvidence(self.transitions, drives, esc, self.esc_stall, self.config.time_scale)
 
     @property
     def malformed(self) -> int:
@@ -199,6 +210,7 @@ class AllocatorDaemon:
         self.config = replace(self.config, core=replace(self.config.core, mode=mode))
         self.core = self._make_core(self.config.core)
         self.core.reset_command(u_prev)
+        self.drive = self._drive_evidence()
 
     def _take_mode_requests(self) -> None:
         """Switch to each mode asked for on ``ports.modes`` (in order) that is not in force."""
@@ -250,18 +262,22 @@ class AllocatorDaemon:
         result = None
         self._restart_after_lapse()
         if fresh.setpoint_stale:
+            self.drive.discard()
             self._tau_d = np.zeros(self.core.k)
             self._send(np.zeros(self.core.m), now, started)
             self.core.reset_command()
         else:
             self._tau_d = setpoint.tau
             obs, u_mean = (None, None) if sample is None else sample
+            feedback = self.drive.take(now, fresh.esc_ages_s, self.config.esc_timeout_s)
             result = self.core.step(
                 setpoint.tau,
                 obs,
                 u_sample=u_mean,
                 elapsed_s=elapsed_s,
                 evidence=Evidence.none(self.core.m) if attacked else self._evidence(now, fresh),
+                feedback=[] if attacked else feedback,  # a stranger's commands on the bus
+                t_s=self.drive.core_time_s(now) if self.drive.diagnosing else None,
             )
             self._send(result.u, now, started)
             if sp_stamp != self._last_sp_stamp:
@@ -275,19 +291,11 @@ class AllocatorDaemon:
             self._publish(now, fresh)
         return result
 
-    def _evidence(self, now: int, fresh: Freshness) -> Evidence:
-        """What the ESC telemetry says of the thrusters this cycle: dead (silent: the
-        watchdog's ``esc_failed``) and stalled (:meth:`_stalled`)."""
-        return Evidence.of(self.core.m, fresh.esc_failed, self._stalled(now, fresh))
-
-    def _stalled(self, now: int, fresh: Freshness) -> BoolArray | None:
-        """Thrusters whose ESC reports no rpm under the command they have, on the ESC ages
-        the watchdog judged this cycle (None: no ESC telemetry, or the check is off)."""
+    def _evidence(self, now: int, fresh: Freshness) -> Evidence | None:
+        """The ESC evidence beyond the drives' diagnosis: without one, silent and stalled."""
         ages, latest = fresh.esc_ages_s, self.ports.esc_latest
-        if self.config.esc_stall_rpm <= 0 or latest is None or ages is None:
-            return None
-        rpm = np.array([math.nan if st is None else st.rpm for st in latest()], dtype=np.float64)
-        return self.esc_stall.update(now, self.core.u_prev, rpm, ages, self.config.esc_timeout_s)
+        u, timeout = self.core.u_prev, self.config.esc_timeout_s
+        return self.drive.evidence(now, u, fresh.esc_failed, ages, latest, timeout)
 
     def _restart_after_lapse(self) -> None:
         """After a lapse the ESCs hold zero (their own timeout), not ``u_prev``: the core's
@@ -310,7 +318,7 @@ class AllocatorDaemon:
             return None
         period = self.period_ns * 1e-9
         lo, hi = self.config.dt_clamp
-        return min(max((now - last) * 1e-9, lo * period), hi * period)
+        return min(max((now - last) * 1e-9, lo * period), hi * period) * self.config.time_scale
 
     def _freshness(self, now: int, sp_stamp: int, tel_stamp: int) -> Freshness:
         cfg = self.config

@@ -180,6 +180,24 @@ def one_round(p: Problems) -> dict[str, float]:
     return {name: float(np.median(t)) * 1e6 for name, t in times.items()}
 
 
+# Issue 25's targets, ratios to pinv: (m, variant, at most)
+TARGETS = (
+    ("4", "step, no sample", 5.0),
+    ("16", "step, no sample", 8.0),
+    ("4", "step + sample, kalman", 20.0),
+    ("16", "step + sample, kalman", 25.0),
+)
+
+
+def print_targets(out: dict[str, Any]) -> None:
+    """Each of issue 25's targets whose m was run: the median ratio against the limit."""
+    for m, variant, limit in TARGETS:
+        if m in out:
+            ratio = float(np.median(out[m]["ratio_to_pinv"][variant]))
+            verdict = "met" if ratio <= limit else "not met"
+            print(f"target: {variant} at m = {m} <= x{limit:g}: x{ratio:.2f} ({verdict})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--m", type=int, nargs="+", default=[4, 8, 16])
@@ -203,6 +221,7 @@ def main() -> None:
                 f"  {v:26s} x{min(r):6.2f} / x{np.median(r):6.2f} / x{max(r):6.2f}"
                 f"   {np.median(us[v]):7.1f} us"
             )
+    print_targets(out)
     print(f"load average {load0:.2f} -> {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     if args.json:
         with open(args.json, "w") as fh:

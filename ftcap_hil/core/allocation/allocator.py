@@ -211,7 +211,8 @@ class Allocator:
             tau_d = np.zeros_like(bf_hat)
             status = AllocationStatus.INVALID_DEMAND
         dead = delta_hat < self.config.dead_threshold
-        if True in dead.tolist():
+        any_dead = True in dead.tolist()
+        if any_dead:
             lo, hi = self.bounds(u_prev, dead, probe_limit, step)
         else:
             lo, hi = command_bounds(self._u_min, self._u_max, step, u_prev)
@@ -228,5 +229,7 @@ class Allocator:
             u = np.where(np.isfinite(u), u, np.clip(0.0, lo, hi))
             status = AllocationStatus.FALLBACK if status is AllocationStatus.OK else status
         planned = beff @ u + bf_hat
-        saturated = ((u - lo <= self._tol) | (hi - u <= self._tol)) & ~dead
+        saturated = (u - lo <= self._tol) | (hi - u <= self._tol)
+        if any_dead:
+            saturated &= ~dead
         return Allocation(u, planned, tau_d - planned, saturated, dead, status, sol.iterations)

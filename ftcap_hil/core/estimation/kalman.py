@@ -60,14 +60,9 @@ from ftcap_hil.core.models.vessel3dof import PlantModel
 
 # Re-exported: callers import the step models from here too.
 __all__ = [
-    "FilterOutput",
-    "KalmanEstimator",
-    "LinearStep",
-    "StepModel",
-    "VesselStep",
-    "inv_small",
+    "FilterOutput", "KalmanEstimator", "LinearStep", "StepModel", "VesselStep", "inv_small",
     "step_model",
-]
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -261,9 +256,7 @@ class KalmanEstimator:
         targets = [0.0 if values[i] < 0.0 else 1.0 for i in active]
         rows = [ks + i for i in active]
         if len(rows) == 1 and self.P[rows[0], rows[0]] != 0.0:
-            # one bound active (the common case): solve and product are one division and
-            # one column scaled, as numpy's 1 x 1 solve and (n, 1) @ (1,) compute them
-            r = rows[0]
+            r = rows[0]  # one bound (the common case): numpy's 1 x 1 solve is this division
             self.z -= self.P[:, r] * ((self.z[r] - targets[0]) / self.P[r, r])
         else:
             PD = self.P[:, rows]  # P D^T

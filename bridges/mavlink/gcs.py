@@ -49,6 +49,7 @@ from bridges.mavlink.vessel import (
     FAILURE_ENABLE_PARAM,
     FAILURE_TYPE_OF,
     FAILURE_UNIT_SYSTEM_MOTOR,
+    HOLD_PARAM,
     MAV_CMD_INJECT_FAILURE,
 )
 from ftcap_hil.core.messages import FaultKind, Odometry, ThrusterCommand, WrenchSetpoint
@@ -327,6 +328,13 @@ class MavlinkGcsLink(PortOwner):
     def allow_fault_injection(self, *, timeout_s: float = 1.0) -> ParamWrite:
         """SYS_FAILURE_EN = 1 on the vessel, and what it reports back."""
         name, value = FAILURE_ENABLE_PARAM, 1
+        return ParamWrite(
+            name, value, self.set_param(self.vessel_ids, name, value, timeout_s=timeout_s)
+        )
+
+    def release_vessel(self, *, timeout_s: float = 1.0) -> ParamWrite:
+        """SIM_HOLD = 0 on the vessel (a held simulated vessel starts), and its answer."""
+        name, value = HOLD_PARAM, 0
         return ParamWrite(
             name, value, self.set_param(self.vessel_ids, name, value, timeout_s=timeout_s)
         )

@@ -67,6 +67,7 @@ from ftcap_hil.ports.mailbox import EventQueue, Stamped
 MAV_CMD_INJECT_FAILURE = 420
 FAILURE_UNIT_SYSTEM_MOTOR = 101
 FAILURE_ENABLE_PARAM = "SYS_FAILURE_EN"
+HOLD_PARAM = "SIM_HOLD"  # a simulated vessel's: 1 waits at sim time 0, 0 starts it (sim.hold)
 
 
 class FailureType(enum.IntEnum):

@@ -67,6 +67,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         f" default: {DEFAULT_MISSION} (140 s)",
     )
     p.add_argument("--mission", help="a mission file or shipped name (see `ftcap-hil gcs -h`)")
+    p.add_argument(
+        "--scenario",
+        help="fly a realistic scenario (file or shipped name, e.g. cybership2-station): the "
+        "vessel runs its truth and faults, the allocator is told it; verdict against offline",
+    )
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help="with --scenario: sim seconds per wall second (vessel, allocator and ground "
+        "station scaled together)",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument(
         "--mcap", action="store_true", help="also DIR/<mode>/run.mcap (ROS 2 messages, Foxglove)"
@@ -91,6 +103,19 @@ class Ports:
     def pick(cls) -> Ports:
         gcs, allocator, vessel = free_ports(socket.SOCK_DGRAM, 3)
         return cls(gcs, allocator, vessel, free_ports(socket.SOCK_STREAM, 1)[0])
+
+
+def scenario_argv(role: str, scenario: str | None, speed: float, out: Path) -> list[str]:
+    """What each process adds to fly a realistic scenario at ``speed`` x real time."""
+    if scenario is None:
+        return []
+    sets = {
+        "allocator": [f"daemon.time_scale={speed!r}"],
+        "sim": ["sim.hold=true", f"sim.realtime_factor={speed!r}"],
+        "gcs": [f"gcs.time_scale={speed!r}"],
+    }[role]
+    extra = ["--record", str(out / "vessel.csv")] if role == "sim" else []
+    return ["--scenario", scenario, *extra, *[a for s in sets for a in ("--set", s)]]
 
 
 def allocator_argv(p: Ports, ros2: bool = False) -> list[str]:
@@ -219,23 +244,61 @@ def start_all(
     zenoh = ROS2_ROUTER_PORT if args.ros2 else ports.zenoh  # where rmw_zenoh looks by default
     ports = Ports(ports.gcs, ports.allocator, ports.vessel, zenoh, hub_port)
     log.info("ports on %s: %s", LOCALHOST, ports)
-    sup.start("allocator", allocator_argv(ports, args.ros2))  # the Zenoh router: first
+    sc, k = args.scenario, args.speed
+    # the Zenoh router: first
+    sup.start(
+        "allocator", allocator_argv(ports, args.ros2) + scenario_argv("allocator", sc, k, out)
+    )
     stop.check()
-    sup.start("vessel", vessel_argv(ports, args.ros2))
+    sup.start("vessel", vessel_argv(ports, args.ros2) + scenario_argv("sim", sc, k, out))
     stop.check()
     argv = gcs_argv(ports, mission, out, args.duration, not args.no_plots, args.mcap)
+    if sc is not None:  # the scenario in place of the mission
+        i = argv.index("--mission")
+        argv[i : i + 2] = scenario_argv("gcs", sc, k, out)
     return sup.start("gcs", argv)
 
 
-def expected_duration(mission: str, duration: float | None) -> float:
+def expected_duration(mission: str, duration: float | None, scenario: str | None = None) -> float:
+    """The mission's (or ``scenario``'s) length in mission seconds, unless ``duration``."""
     if duration is not None:
         return duration
+    if scenario is not None:
+        from ftcap_hil.config.scenario import load_scenario
+
+        return load_scenario(scenario).duration_s
     from ftcap_hil.config.mission import load_mission
 
     return load_mission(mission).duration_s
 
 
-def print_summary(out: Path, wall_s: float, mission: str, duration_s: float) -> None:
+def scenario_verdict(
+    flight: dict[str, Any], out: Path, scenario: str, duration_s: float
+) -> list[str]:
+    """A realistic flight against the offline run of the same scenario and seed, in the
+    flight's mode (``report.hil_compare``; the vessel's record and the flight's flags)."""
+    from dataclasses import replace
+
+    from ftcap_hil.config.scenario import load_scenario
+    from ftcap_hil.core.status import Mode
+    from ftcap_hil.report.hil_compare import comparison_lines, live_metrics, offline_metrics
+    from ftcap_hil.runtime.offline import run_mode
+
+    mode = next(iter(flight["modes"]))
+    gcs_csv, vessel_csv = out / mode / "timeseries.csv", out / "vessel.csv"
+    if not (gcs_csv.exists() and vessel_csv.exists()):
+        return [f"verdict: none (no {gcs_csv} or {vessel_csv})"]
+    sc = replace(load_scenario(scenario), duration_s=duration_s)
+    none, offline = run_mode(sc, Mode.NONE), run_mode(sc, Mode(mode))
+    live = live_metrics(sc.faults, vessel_csv, gcs_csv, none)
+    period = sc.estimation_period_s or sc.dt_s
+    head = f"verdict ({mode} live over MAVLink/CAN against offline, {sc.name} seed {sc.seed}):"
+    return [head, *comparison_lines(live, offline_metrics(offline, none), period)]
+
+
+def print_summary(
+    out: Path, wall_s: float, mission: str, duration_s: float, scenario: str | None = None
+) -> None:
     from ftcap_hil.report.summary import flight_summary_lines as summary_lines
 
     path = out / "results.json"
@@ -245,7 +308,12 @@ def print_summary(out: Path, wall_s: float, mission: str, duration_s: float) -> 
     flight = json.loads(path.read_text())
     for line in summary_lines(flight):
         print(line)
-    for line in verdict(flight, mission, duration_s):
+    lines = (
+        verdict(flight, mission, duration_s)
+        if scenario is None
+        else scenario_verdict(flight, out, scenario, duration_s)
+    )
+    for line in lines:
         print(line)
     plots = sorted(p.name for p in out.glob("*.png"))
     print(f"results: {path}; timeseries: {', '.join(str(p) for p in out.glob('*/timeseries.csv'))}")
@@ -266,7 +334,7 @@ def _fly(
     try:
         print(f"demo: flying {mission} for {expected_s:.0f} s; logs in {out / 'logs'}", flush=True)
         gcs = start_all(sup, stop, args, mission, out)
-        supervise(sup, gcs, loop, stop, budget_s=expected_s + 120.0)
+        supervise(sup, gcs, loop, stop, budget_s=expected_s / args.speed + 120.0)
     except Interrupted as e:
         log.error("interrupted (%s): stopping everything", e)
         return 130
@@ -300,10 +368,17 @@ def run(args: argparse.Namespace) -> int:
     """Fly the demo; the exit code (module docstring)."""
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError(f"--duration must be positive, got {args.duration}")
+    if not (math.isfinite(args.speed) and args.speed > 0):
+        raise ConfigError(f"--speed must be positive, got {args.speed}")
+    if args.scenario is not None and args.mission is not None:
+        raise ConfigError("--scenario and --mission: give one (the scenario is the mission)")
+    if args.scenario is None and args.speed != 1.0:
+        raise ConfigError("--speed needs --scenario (the paper's missions fly in real time)")
     mission = args.mission or (DEFAULT_MISSION if args.duration is None else PAPER_MISSION)
+    mission = args.scenario or mission
     out = args.out or Path("ftcap-runs") / f"demo-{time.strftime('%Y%m%d-%H%M%S')}"
     try:
-        expected = expected_duration(mission, args.duration)
+        expected = expected_duration(mission, args.duration, args.scenario)
     except ConfigError:
         raise
     except ValueError as e:
@@ -318,5 +393,5 @@ def run(args: argparse.Namespace) -> int:
     for failure in sup.failures():
         log.error("child failed: %s", failure)
         code = code or 1
-    print_summary(out, time.monotonic() - started, mission, expected)
+    print_summary(out, time.monotonic() - started, mission, expected, args.scenario)
     return code

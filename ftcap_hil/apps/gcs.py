@@ -29,7 +29,12 @@ from pathlib import Path
 from typing import Any
 
 from ftcap_hil.apps.options import add_set_option
-from ftcap_hil.config.mission import Mission, load_mission, shipped_missions
+from ftcap_hil.config.mission import (
+    Mission,
+    load_mission,
+    scenario_mission,
+    shipped_missions,
+)
 from ftcap_hil.core.errors import ConfigError, ExitCode, FtcapError
 from ftcap_hil.report.flight import NOT_ON_MAVLINK, FlightRecorder
 from ftcap_hil.report.records import RunRecord
@@ -50,10 +55,15 @@ PROGRESS_EVERY_S = 5.0  # --progress: a line this often (mission time)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument(
         "--mission",
-        required=True,
         help=f"a mission TOML or one of: {', '.join(shipped_missions())}",
+    )
+    which.add_argument(
+        "--scenario",
+        help="a realistic scenario the vessel runs (sim --scenario, held): released at the "
+        "start, flown on the vessel's clock, no injections",
     )
     p.add_argument("--out", type=Path, help="output folder (default: ftcap-runs/<mission>-<time>)")
     p.add_argument("--duration", type=float, help="mission seconds to fly (default: the mission's)")
@@ -124,9 +134,11 @@ def fly_mission(args: argparse.Namespace, mission: Mission, out: Path) -> int:
     with MavlinkGcsLink(_endpoint(args)) as link:
         station = GroundStation(link)
         with capture_signals(station.request_exit) as signals:
+            held = mission.gcs.time_scale if mission.gcs.vessel_clock else None
             conn = station.connect(
-                mission.gcs.connect_timeout_s, enable_failures=inject, mode=mission.mode
-            )
+                mission.gcs.connect_timeout_s, enable_failures=inject, mode=mission.mode,
+                release=held,
+            )  # fmt: skip
             mode = conn.mode or "unknown"
             log.info(
                 "flying %s (%s) for %.1f s, allocator mode %s, T_s %.4f s",
@@ -175,7 +187,10 @@ def _exit_code(flight: Flight, error: GroundStationError | None, interrupted: bo
 
 def run(args: argparse.Namespace) -> int:
     try:
-        mission = load_mission(args.mission, args.set)
+        if args.mission is not None:
+            mission = load_mission(args.mission, args.set)
+        else:
+            mission = scenario_mission(args.scenario, args.set)
         if args.duration is not None:
             mission = mission.with_duration(args.duration)
         for key in ("gcs_port", "allocator_port", "vessel_port"):

@@ -20,8 +20,6 @@ from ftcap_hil.core.errors import ConfigError, PortError
 from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, Odometry, ThrusterCommand
 from ftcap_hil.ports.mailbox import Stamped
 
-HOLD_PARAM = "SIM_HOLD"  # the vessel's parameter: 1 waits at sim time 0 (sim.hold)
-
 
 class VesselPorts:
     """CAN (commands in, ESC telemetry out), MAVLink and Zenoh (odometry out, faults in):
@@ -89,7 +87,7 @@ class VesselPorts:
 
     def _open_mavlink(self, c: MavlinkSettings, m: int) -> None:
         from bridges.mavlink.params import ParamSpec, ParamType
-        from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, MavlinkVesselLink
+        from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, HOLD_PARAM, MavlinkVesselLink
 
         hold = ParamSpec(
             HOLD_PARAM, int(self._hold), ParamType.INT, 0, 1,
@@ -141,6 +139,8 @@ class VesselPorts:
 
     def held(self) -> bool:
         """SIM_HOLD is 1 (the vessel waits at t = 0); False without MAVLink."""
+        from bridges.mavlink.vessel import HOLD_PARAM
+
         return self.mavlink is not None and self.mavlink.params.get(HOLD_PARAM) == 1
 
     def send_odometry(self, odom: Odometry) -> None:

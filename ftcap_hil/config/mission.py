@@ -18,6 +18,10 @@ mission replaces the scenario's table (same syntax as scenario files, docs/scena
     odometry_timeout_s = 5.0     # no ODOMETRY for this long mid-flight -> abort
     wrench_limit = [1000.0, 1000.0, 1000.0]  # demands beyond are shrunk along their direction
     clear_faults_at_end = true
+    vessel_clock = false         # true: the vessel runs the scenario (a realistic truth and
+                                 # its faults) held at t = 0: released at the start, flown on
+                                 # its clock, nothing injected (ftcap-hil demo --scenario)
+    time_scale = 1.0             # with vessel_clock: the vessel's sim seconds per wall second
 
 The fault schedule is the truth recorded in the timeseries;
 :func:`~ftcap_hil.core.faults.injection_plan` turns it into MAV_CMD_INJECT_FAILURE requests
@@ -37,7 +41,7 @@ from ftcap_hil.config.realistic import anchor_preset, is_realistic, parse_realis
 from ftcap_hil.config.scenario import SHIPPED
 from ftcap_hil.config.scenario_tables import REPLACEABLE, scenario_from
 from ftcap_hil.config.tables import Table
-from ftcap_hil.config.toml import TomlFile, read_toml, shipped_names
+from ftcap_hil.config.toml import TomlFile, apply_overrides, read_toml, shipped_names
 from ftcap_hil.core.errors import ConfigError
 from ftcap_hil.core.faults import Injection, injection_plan
 from ftcap_hil.core.scenario import Scenario, TimeUnit
@@ -46,7 +50,10 @@ from ftcap_hil.core.status import Mode
 MISSIONS = "ftcap_hil.data.hil.missions"
 # The keys mission_from and gcs_settings_from read (tests/docker checks --set against them).
 MISSION_KEYS = ("name", "description", "scenario", "duration", "period", "mode")
-GCS_KEYS = ("connect_timeout_s", "odometry_timeout_s", "wrench_limit", "clear_faults_at_end")
+GCS_KEYS = (
+    "connect_timeout_s", "odometry_timeout_s", "wrench_limit", "clear_faults_at_end",
+    "vessel_clock", "time_scale",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -59,6 +66,8 @@ class GcsSettings:
     odometry_timeout_s: float = 5.0
     wrench_limit: tuple[float, float, float] = (1000.0, 1000.0, 1000.0)  # the allocator's
     clear_faults_at_end: bool = True
+    vessel_clock: bool = False  # the vessel runs the scenario on its clock (module docstring)
+    time_scale: float = 1.0  # the vessel's sim seconds per wall second (vessel_clock only)
 
 
 @dataclass(frozen=True)
@@ -80,7 +89,10 @@ class Mission:
 
     @property
     def injections(self) -> list[Injection]:
-        """The MAV_CMD_INJECT_FAILURE requests that reproduce the fault schedule."""
+        """The MAV_CMD_INJECT_FAILURE requests that reproduce the fault schedule (none when
+        the vessel runs the schedule itself, ``gcs.vessel_clock``)."""
+        if self.gcs.vessel_clock:
+            return []
         return injection_plan(self.scenario.faults, self.duration_s)
 
     def with_duration(self, duration_s: float) -> Mission:
@@ -113,6 +125,8 @@ def gcs_settings_from(t: Table) -> GcsSettings:
         t.number("odometry_timeout_s", d.odometry_timeout_s, positive=True),
         (float(limit[0]), float(limit[1]), float(limit[2])),
         t.boolean("clear_faults_at_end", d.clear_faults_at_end),
+        t.boolean("vessel_clock", d.vessel_clock),
+        t.number("time_scale", d.time_scale, positive=True),
     )
 
 
@@ -151,6 +165,16 @@ def parse_mission(data: dict[str, Any], where: str, base: Path | None = None) ->
     """A mission from a parsed TOML document (``where`` names the file in messages)."""
     with Table(data, where) as root:
         return mission_from(root, base)
+
+
+def scenario_mission(name_or_path: str | Path, overrides: list[str] | None = None) -> Mission:
+    """The mission a vessel running a realistic scenario is flown with (``ftcap-hil gcs
+    --scenario``): the scenario's reference, controller, period and duration, the vessel on
+    its own clock (``[gcs] vessel_clock``), with ``SECTION.KEY=VALUE`` overrides."""
+    path = Path(name_or_path)
+    ref = str(path.resolve()) if path.is_file() else str(name_or_path)
+    data = {"mission": {"scenario": ref}, "gcs": {"vessel_clock": True}}
+    return parse_mission(apply_overrides(data, overrides or []), f"--scenario {name_or_path}")
 
 
 def load_mission(name_or_path: str | Path, overrides: list[str] | None = None) -> Mission:

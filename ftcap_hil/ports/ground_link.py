@@ -80,6 +80,10 @@ class GroundLink(Protocol):
         """Switch the vessel's fault injection on; the write and its answer."""
         ...
 
+    def release_vessel(self, *, timeout_s: float = ...) -> ParamWrite:
+        """Start a simulated vessel held at sim time 0; the write and its answer."""
+        ...
+
     def request_mode(self, mode: Mode, *, timeout_s: float = ...) -> ParamWrite:
         """Ask the allocator to run in ``mode``; the write and its answer."""
         ...

@@ -325,7 +325,7 @@ class AllocatorDaemon:
         esc_failed, ages = None, None
         if self.ports.esc_ages is not None:
             ages = self.ports.esc_ages(now)
-            esc_failed = self.esc_watchdog.failed(now, ages, cfg.esc_timeout_s)
+            esc_failed = self.drive.failed(self.esc_watchdog.failed(now, ages, cfg.esc_timeout_s))
         sp_age, tel_age = _age_s(now, sp_stamp), _age_s(now, tel_stamp)
         tel_stale = tel_age > cfg.telemetry_timeout_s
         self.transitions.update(

@@ -110,6 +110,11 @@ class DriveEvidence:
         )
         return out
 
+    def failed(self, silent: BoolArray) -> BoolArray:
+        """The watchdog's silent ESCs as the status reports them failed: none with the
+        drives' diagnosis (a silent drive is telemetry lost, its hypothesis says so)."""
+        return np.zeros_like(silent) if self._drives is not None else silent
+
     def discard(self) -> None:
         """Drop the reports received so far (a cycle without allocation: they would be
         judged against commands the core never gave)."""

@@ -73,7 +73,7 @@ class Flight:
         progress: ProgressLine | None = None,
     ) -> None:
         self.link, self.plan, self.progress = link, plan, progress
-        self.loop = DeadlineLoop(int(round(plan.period_s * 1e9)))
+        self.loop = DeadlineLoop(int(round(plan.period_s / plan.time_scale * 1e9)))
         self.t0_ns = self.loop.clock() if t0_ns is None else t0_ns
         self.recorder, self.line, self._check = recorder, line, check
         self.cycles = self.sent = self.send_failures = self.limited_cycles = 0
@@ -145,7 +145,7 @@ class Flight:
     # --- one cycle ---
 
     def _tick(self, now_ns: int) -> None:
-        t = (now_ns - self.t0_ns) * 1e-9
+        t = (now_ns - self.t0_ns) * 1e-9 * self.plan.time_scale
         if self.plan.duration_s is not None and t >= self.plan.duration_s:
             self.loop.request_exit()
             return

@@ -125,6 +125,7 @@ class FlightPlan:
     keep_statuses: bool = False
     inject_timeout_s: float = 1.0  # per attempt, waiting for the COMMAND_ACK
     inject_attempts: int = 3
+    time_scale: float = 1.0  # mission (vessel) seconds per wall second
 
 
 # --- fault injection off the loop thread ---

@@ -85,6 +85,7 @@ def flight_plan(mission: Mission) -> FlightPlan:
         injections=tuple(mission.injections),
         wrench_limit=mission.gcs.wrench_limit,
         odometry_timeout_s=mission.gcs.odometry_timeout_s,
+        time_scale=mission.gcs.time_scale if mission.gcs.vessel_clock else 1.0,
     )
 
 
@@ -141,6 +142,17 @@ class GroundStation:
             time.sleep(0.01)
         return 0 if first is None else first.stamp_ns
 
+    def _vessel_epoch(self, time_scale: float, slice_s: float) -> int:
+        """When (monotonic ns) the released vessel's clock was 0: the first ODOMETRY past
+        t = 0, its receipt less its sim time at ``time_scale``; 0 while none came."""
+        end = time.monotonic() + slice_s
+        while time.monotonic() < end:
+            got = self.link.odometry.latest()
+            if got is not None and got.value.time_s > 0.0:
+                return got.stamp_ns - int(got.value.time_s / time_scale * 1e9)
+            time.sleep(0.005)
+        return 0
+
     def _confirm(self, who: str, ids: tuple[int, int], write: Callable[[], ParamWrite]) -> float:
         """``write()`` a parameter of the ``who`` at ``ids``; the value it reports back."""
         self._abort_if_asked()
@@ -161,6 +173,7 @@ class GroundStation:
         mode: Mode | None = None,
         read_mode: bool = True,
         param_timeout_s: float = 1.0,
+        release: float | None = None,
     ) -> Connection:
         """Start-up over MAVLink (module docstring); :class:`NoAnswer`, :class:`Refused`,
         :class:`Interrupted` or whatever ``check`` raises if it cannot complete."""
@@ -192,6 +205,13 @@ class GroundStation:
                 lambda: link.request_mode(mode, timeout_s=param_timeout_s),
             )
         mode_name = self._read_mode(min(timeout_s, 5.0)) if read_mode else None
+        if release is not None:  # a held vessel: mission time is its clock from here
+            write = functools.partial(link.release_vessel, timeout_s=param_timeout_s)
+            self._confirm("vessel", link.vessel_ids, write)
+            t0_ns = self._wait(functools.partial(self._vessel_epoch, release), timeout_s)
+            if t0_ns is None:
+                raise NoAnswer(f"the vessel sent no ODOMETRY after its release in {timeout_s:g} s")
+            return Connection(t0_ns, heartbeats_ns, ready_ns, enabled, mode_name)
         t0_ns = self._wait(self._first_odometry, timeout_s)
         if t0_ns is None:
             raise NoAnswer(f"no ODOMETRY from the vessel within {timeout_s:g} s")

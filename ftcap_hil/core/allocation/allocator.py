@@ -26,6 +26,7 @@ import numpy as np
 
 from ftcap_hil.core.allocation.qp import make_solver
 from ftcap_hil.core.effectiveness.geometry import ThrusterSet, command_bounds
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import BoolArray, FloatArray
 
 _MAX_DEMAND = 10.0  # |tau_d - b_hat| / S beyond this is scaled down before the QP: the
@@ -63,6 +64,7 @@ class AllocatorConfig:
             raise ValueError(f"allocator.dead_threshold: need [0, 1), got {self.dead_threshold}")
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class Allocation:
     """The result of one :meth:`Allocator.allocate`; wrenches (k,) are [X (N), Y (N), N (N*m)]

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import BoolArray, FloatArray, IntArray
 
 
@@ -49,6 +50,7 @@ class ExcitationConfig:
             raise ValueError("excitation: periods must be >= 1 (probe_interval >= 0)")
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class ExcitationOutput:
     """One cycle's excitation, per thruster (m,), in N."""

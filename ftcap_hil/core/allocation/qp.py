@@ -23,11 +23,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import FloatArray
 
 _BIG = 1e20  # stands for an infinite bound in backends that want finite numbers
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class BoxQpSolution:
     """A solve's outcome: ``x`` (n,) inside [lo, hi] when ``found``, else whatever the

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ftcap_hil.core.errors import require_member
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import FloatArray
 
 
@@ -96,6 +97,7 @@ class EstimatorConfig:
                 raise ValueError(f"estimator.{key}: must be > 0, got {getattr(self, key)}")
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class Estimate:
     """One fault estimate: effectiveness, bias (as a wrench and per thruster) and window

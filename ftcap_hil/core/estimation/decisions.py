@@ -43,12 +43,14 @@ import numpy as np
 
 from ftcap_hil.core.estimation.config import BiasCompensation, EstimatorConfig
 from ftcap_hil.core.estimation.kalman import FilterOutput, inv_small
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import BoolArray, FloatArray
 
 # chi^2 quantiles at 0.999 for 0..3 degrees of freedom (bias attribution residual).
 _CHI2_999 = (0.0, 10.83, 13.82, 16.27)
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class Decision:
     """What the allocator is to use and what is reported, per thruster (m,) or wrench (k,)."""

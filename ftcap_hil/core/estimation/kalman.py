@@ -55,6 +55,7 @@ from ftcap_hil.core.estimation.step_models import (
     step_model,
 )
 from ftcap_hil.core.estimation.wave_model import WaveModel
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.models.vessel3dof import PlantModel
 
@@ -65,6 +66,7 @@ __all__ = [
 ]  # fmt: skip
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class FilterOutput:
     """What one filter update produced, besides the estimate itself."""

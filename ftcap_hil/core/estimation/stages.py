@@ -30,6 +30,7 @@ from ftcap_hil.core.estimation.decisions import Decision, FaultDecider
 from ftcap_hil.core.estimation.kalman import KalmanEstimator
 from ftcap_hil.core.estimation.windowed import LiteralEstimator, WindowedEstimator
 from ftcap_hil.core.faults import Truth
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.models.vessel3dof import PlantModel
 
@@ -60,6 +61,7 @@ def _total(x: FloatArray) -> float:
 Sample = Observation | FloatArray
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class StageOutput:
     """One stage update: reported estimate, what the allocator uses, fault flags."""

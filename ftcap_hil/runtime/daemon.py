@@ -145,9 +145,9 @@ class AllocatorDaemon:
         self.esc_stall = EscStallMonitor(
             self.transitions, self.core.u_range, config.esc_stall_rpm, config.esc_stall_s
         )
-        self.drive = self._drive_evidence()
+        self.drive, c = self._drive_evidence(), config
         self.sampler = EstimationSampler(
-            config.estimation_period_s, config.vessel_clock, config.odometry_limits
+            c.estimation_period_s, c.vessel_clock, c.odometry_limits, c.time_scale
         )
         self.telemetry = TelemetryIntake(
             TelemetryGuard(

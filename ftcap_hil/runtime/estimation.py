@@ -91,7 +91,8 @@ class VesselClock:
     going backwards restarts the filter.
     """
 
-    def __init__(self, window: int = 50, max_shift_s: float = 0.25) -> None:
+    def __init__(self, window: int = 50, max_shift_s: float = 0.25, rate: float = 1.0) -> None:
+        self._rate = rate  # vessel seconds per second of this clock (a faster sim: > 1)
         self._offsets: deque[int] = deque(maxlen=window)
         self._last_t_ns: int | None = None
         self._max_shift_ns = int(max_shift_s * 1e9)
@@ -100,7 +101,7 @@ class VesselClock:
         """The receipt stamp corrected to the least-delayed offset (class docstring)."""
         if not math.isfinite(vessel_time_s):
             return receipt_ns
-        t_ns = int(round(vessel_time_s * 1e9))
+        t_ns = int(round(vessel_time_s / self._rate * 1e9))
         if self._last_t_ns is not None and t_ns < self._last_t_ns:
             self._offsets.clear()
         self._last_t_ns = t_ns
@@ -202,17 +203,21 @@ class EstimationSampler:
     """Pairs telemetry with the commands sent (module docstring).
 
     ``use_vessel_clock``: time the command average by :class:`VesselClock` (else by the
-    receipt stamps).
+    receipt stamps); ``time_scale``: the vessel's seconds per second of this clock.
     """
 
     def __init__(
-        self, period_s: float, use_vessel_clock: bool, limits: OdometryLimits | None = None
+        self,
+        period_s: float,
+        use_vessel_clock: bool,
+        limits: OdometryLimits | None = None,
+        time_scale: float = 1.0,
     ) -> None:
         self.period_s = period_s
         self.gate = PlausibilityGate(limits)
         self.use_vessel_clock = use_vessel_clock
         self.history = CommandHistory(horizon_s=10 * period_s + 5.0)
-        self._clock = VesselClock()
+        self._clock = VesselClock(rate=time_scale)
         self._clock_fed = (-1, -1)  # (receipt stamp, mapped stamp) of the last odometry
         self._last: _Point | None = None
 

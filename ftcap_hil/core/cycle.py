@@ -244,8 +244,7 @@ class FtcapCore:
             verdict, u_sample = self._diagnose(feedback, t_s, w is not None, u_sample)
         out = self.stage.update(w, u_sample, truth)
         if verdict is not None:
-            confirmed = self._motion_confirmed(out, verdict, elapsed_s)
-            ev = ev.with_shaft(verdict, confirmed, self.config.diagnosis.motion)
+            ev = self._with_drives(ev, verdict, out, elapsed_s)
         seen, restorable = self._judge(ev, out)
         u_pref, probe = self._excite(seen, advance=w is not None)
 
@@ -308,6 +307,14 @@ class FtcapCore:
             implied = implied * verdict.load_factor
             u_sample = np.where(np.isfinite(implied) & verdict.fresh, implied, u_sample)
         return verdict, u_sample
+
+    def _with_drives(
+        self, ev: Evidence, verdict: ShaftVerdict, out: StageOutput, elapsed_s: float | None
+    ) -> Evidence:
+        """``ev`` with the drives' verdict and the diagnosis's switches (motion, dither)."""
+        confirmed = self._motion_confirmed(out, verdict, elapsed_s)
+        diag = self.config.diagnosis
+        return ev.with_shaft(verdict, confirmed, diag.motion, diag.dither)
 
     def _motion_confirmed(
         self, out: StageOutput, verdict: ShaftVerdict, elapsed_s: float | None

@@ -45,6 +45,7 @@ class Evidence:
     shaft: ShaftVerdict | None = None
     motion_confirmed: BoolArray | None = None  # motion-only removals held long enough
     motion: bool = True  # False: the drives alone decide
+    dither: bool = False  # dither the thrusters whose drives report fresh telemetry
 
     @classmethod
     def of(cls, m: int, dead: object | None = None, stalled: object | None = None) -> Evidence:
@@ -59,14 +60,22 @@ class Evidence:
         return cls.of(m)
 
     def with_shaft(
-        self, verdict: ShaftVerdict, motion_confirmed: BoolArray, motion: bool = True
+        self,
+        verdict: ShaftVerdict,
+        motion_confirmed: BoolArray,
+        motion: bool = True,
+        dither: bool = False,
     ) -> Evidence:
         """This evidence with the drives' verdict: actionable shaft losses are allocated at
         the effectiveness the drive shows (times the motion's hull factor), a stuck
         thruster's held force is compensated, and a motion-only removal of a thruster whose
         drive shows nothing wrong is only advisory until ``motion_confirmed``. ``motion``
-        False: the drives alone decide (the motion's estimate is reported, never used)."""
-        return replace(self, shaft=verdict, motion_confirmed=motion_confirmed, motion=motion)
+        False: the drives alone decide (the motion's estimate is reported, never used).
+        ``dither`` False: no dither on a thruster whose drive reports fresh telemetry (its
+        drive judges it; probes of a thruster taken out go on)."""
+        return replace(
+            self, shaft=verdict, motion_confirmed=motion_confirmed, motion=motion, dither=dither
+        )
 
     @property
     def out(self) -> BoolArray:
@@ -163,4 +172,5 @@ def _with_shaft(
         out, estimate=est, delta_alloc=delta, bf_alloc=bf + B @ held,
         faulty=(out.faulty if evidence.motion else np.zeros_like(act)) | act, decision=dec,
     )  # fmt: skip
-    return judged, stuck, v.alarm | advisory
+    quiet_drive = v.fresh if not evidence.dither else np.zeros_like(v.fresh)
+    return judged, stuck, v.alarm | advisory | quiet_drive

@@ -89,6 +89,10 @@ class DiagnosisConfig:
 
     enabled: bool = True  # judge the thrusters by their drives when the drives are known
     motion: bool = True  # False: the drives alone decide (the motion filter runs, unheard)
+    # Dither a thruster whose drive reports fresh telemetry. Off: its drive judges it, and the
+    # dither's only gain, shaft-invisible losses (hull, interaction), costs the boat its
+    # motion on every healthy hour (CyberShip II: 3-5 mm in 120 s where CAP moves 0).
+    dither: bool = False
     floor_rel: float = 0.1
     probe_rel: float = 0.03  # a thruster that is not turning is judged again from this
     band_rel: float = 0.03

@@ -49,6 +49,7 @@ from ftcap_hil.core.estimation.stages import (
 from ftcap_hil.core.estimation.windowed import LiteralEstimator, WindowedEstimator
 from ftcap_hil.core.evidence import Evidence, Judged, apply_evidence
 from ftcap_hil.core.faults import Truth
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.models.vessel3dof import PlantModel
 from ftcap_hil.core.status import Mode
@@ -100,6 +101,7 @@ class ThrustLag:
         return mean
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class CycleResult:
     """What one :meth:`FtcapCore.step` produced; per-thruster arrays are (m,)."""

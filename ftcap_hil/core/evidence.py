@@ -17,6 +17,7 @@ import numpy as np
 from ftcap_hil.core.estimation.config import Estimate
 from ftcap_hil.core.estimation.shaft import Hypothesis, ShaftVerdict
 from ftcap_hil.core.estimation.stages import StageOutput
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import BoolArray, FloatArray
 
 
@@ -30,6 +31,7 @@ def _flags(name: str, value: object | None, m: int) -> BoolArray:
     return flags
 
 
+@fast_init  # built every cycle by the shell (core/frozen.py)
 @dataclass(frozen=True)
 class Evidence:
     """Thruster failures known from outside the estimator, (m,) bool each.
@@ -84,6 +86,7 @@ class Evidence:
         return out
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class Judged:
     """One cycle's stage output with the evidence applied: what the allocation reads.

@@ -35,6 +35,7 @@ from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.core.models.vessel3dof import PlantModel
 
 
+@fast_init  # built every estimation sample (core/frozen.py)
 @dataclass(frozen=True)
 class Observation:
     """The measured plant state at the start and the end of one estimation interval.

@@ -17,6 +17,7 @@ from ftcap_hil.apps.options import add_set_option
 from ftcap_hil.apps.vessel_ports import VesselPorts
 from ftcap_hil.config.sim import load_config
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.runtime.command_log import open_new_record
 from ftcap_hil.runtime.vessel_process import Recorder, VesselProcess
 
 log = logging.getLogger(__name__)
@@ -47,11 +48,8 @@ def run(args: argparse.Namespace) -> int:
         )
         stack.callback(ports.shutdown)
         recorder = None
-        if args.record is not None:
-            try:
-                fh = stack.enter_context(open(args.record, "w", newline=""))
-            except OSError as e:
-                raise ConfigError(f"--record: cannot write {args.record}: {e}") from e
+        if args.record is not None:  # a record already there is kept aside, never truncated
+            fh = stack.enter_context(open_new_record(args.record, "--record"))
             recorder = Recorder(fh, cfg.sim.thrusters)
         truth = "the paper's plant" if cfg.scenario is None else f"scenario {cfg.scenario.name}"
         log.info(

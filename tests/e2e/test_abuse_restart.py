@@ -44,3 +44,20 @@ def test_a_restart_keeps_the_crashed_runs_command_log(hil: Rig) -> None:
     assert kept.read_bytes() == survived  # still there after the second run's end
     rows = len(survived.splitlines()) - 1
     print(f"\nkept {rows} rows of the killed run as {kept.name}")
+
+
+def test_a_restarted_vessel_keeps_the_earlier_record(hil: Rig) -> None:
+    """The same for the vessel's ``--record``: a second ``ftcap-hil sim`` with the path of
+    the first keeps the first run's rows as ``NAME.1``."""
+    alone = ["zenoh.enabled=false"]  # no allocator: no Zenoh router to join
+    first = hil.start_sim(alone)
+    assert wait_until(lambda: _rows(hil.record) >= 5, 20.0), first.output()
+    first.send(signal.SIGKILL)
+    first.wait(10.0)
+    survived = hil.record.read_bytes()
+    second = hil.start_sim(alone)
+    kept = hil.record.with_name(hil.record.name + ".1")
+    assert kept.read_bytes() == survived
+    assert wait_until(lambda: _rows(hil.record) >= 2, 20.0), second.output()
+    second.send(signal.SIGTERM)
+    assert second.wait(20.0) == 0, second.output()

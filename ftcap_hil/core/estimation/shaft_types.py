@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import BoolArray, FloatArray
 
 
@@ -70,6 +71,7 @@ class DriveModel:
             )
 
 
+@fast_init  # one per drive report (core/frozen.py)
 @dataclass(frozen=True)
 class DriveReport:
     """One drive's telemetry as the allocator received it: at ``t_s`` (its clock, s),
@@ -126,6 +128,7 @@ class DiagnosisConfig:
                 raise ValueError(f"diagnosis.{name}: expected a finite number >= 0, got {value!r}")
 
 
+@fast_init  # built every cycle (core/frozen.py)
 @dataclass(frozen=True)
 class ShaftVerdict:
     """Per thruster (m,): the hypothesis, the effectiveness its drive shows (1 where it

@@ -6,6 +6,7 @@ forces go through the configured thruster curves, GetNodeInfo is answered with
 from __future__ import annotations
 
 import contextlib
+import math
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -62,9 +63,10 @@ class Tap(can.Listener):
             elif isinstance(got.message, NodeStatusMsg):
                 self.status.append(got.message)
 
-    def raw_since(self, t_ns: int) -> list[tuple[int, ...]]:
+    def raw_since(self, t_ns: int, until_ns: float = math.inf) -> list[tuple[int, ...]]:
+        """The RawCommands received from ``t_ns`` (and before ``until_ns``)."""
         with self._lock:
-            return [r for t, r in self.raw if t >= t_ns]
+            return [r for t, r in self.raw if t_ns <= t < until_ns]
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float) -> bool:
@@ -102,10 +104,13 @@ def test_the_stream_runs_between_allocations_through_the_curves(hub: CanHub) -> 
         assert ports.thrusters.send(u)
         time.sleep(1.0)  # no allocation for 1 s: the stream alone keeps the ESCs fed
         want = (5277, -6117, 2959, 0)  # the T200 curve scaled to 0.1 N, 8191 = full raw
-        got = tap.raw_since(t0)
+        # Frames received in the first 0.9 s were sent within the stream's 1 s hold (sent
+        # before received), whenever the loaded machine let this thread read them; after
+        # the hold the stream sends zero, as it must (one loaded run caught 2 of those).
+        got = tap.raw_since(t0, t0 + 0.9e9)
         frames = got[got.index(want) :]  # a tick may send the start-up zero before it
-        # 100 Hz: ~100 in 1 s; half of that leaves room for a loaded 2-core machine.
-        assert len(frames) >= 50, f"{len(frames)} RawCommands in 1 s at 100 Hz"
+        # 100 Hz: ~90 in 0.9 s; half of that leaves room for a loaded 2-core machine.
+        assert len(frames) >= 45, f"{len(frames)} RawCommands in 0.9 s at 100 Hz"
         assert frames.count(want) == len(frames) and len(got) - len(frames) <= 1
         assert want[0] > 4096 and want[1] < -4096  # the T200 shape: 50 % thrust above half raw
 

@@ -173,3 +173,13 @@ def test_bad_samples_are_ignored_and_bad_settings_name_the_key() -> None:
         DiagnosisConfig(cusum_h=-1.0)
     with pytest.raises(ValueError, match="k_thrust"):
         DriveModel(1.0, 0.1, k_thrust=0.0)
+
+
+def test_a_speed_predicted_near_zero_bounds_the_thrust_ratio() -> None:
+    """A frozen shaft turning while its command went to ~0 (the sweeps campaign's frozen and
+    double faults on CyberShip II): the ratio of the speeds squared overflowed a float."""
+    from ftcap_hil.core.estimation.shaft import RATIO_MAX, _thrust_ratio
+
+    assert _thrust_ratio(10.0, 1e-160) == RATIO_MAX
+    assert _thrust_ratio(1.0, 2.0) == 0.25 and _thrust_ratio(-1.0, 2.0) == 0.0
+    assert _thrust_ratio(1.0, 0.0) == 0.0

@@ -69,6 +69,17 @@ __all__ = [
     "verdict_without_telemetry",
 ]
 
+RATIO_MAX = 4.0  # the thrust the speed shows over the predicted, at most (twice the speed)
+
+
+def _thrust_ratio(n_m: float, n_p: float) -> float:
+    """(n_m / n_p)^2 where both turn the same way (else 0), at most RATIO_MAX: a speed
+    predicted near 0 (a frozen shaft's command gone to 0) gave 1e300 and OverflowError."""
+    if not n_p or n_m * n_p <= 0.0:
+        return 0.0
+    r = n_m / n_p
+    return min(r * r, RATIO_MAX)
+
 
 @dataclass(frozen=True)
 class ResidualSample:
@@ -163,9 +174,8 @@ class ShaftDiagnoser:
         ch.thrust.update(ch.r_t, cfg.cusum_k)
         if math.isfinite(ch.r_q):
             ch.load.update(ch.r_q, cfg.cusum_k)
-        if abs(n_p) > 0.0:
-            same_way = (n_m / n_p) ** 2 if n_m * n_p > 0.0 else 0.0
-            ch.ratio_t += 0.2 * (same_way - ch.ratio_t)
+        if n_p:
+            ch.ratio_t += 0.2 * (_thrust_ratio(n_m, n_p) - ch.ratio_t)
         if math.isfinite(ch.r_q):
             i_pred = ch.current_at(n_m) - ch.model.idle_a
             if i_pred > 1e-9:
@@ -201,7 +211,7 @@ class ShaftDiagnoser:
         else:
             return
         ch.since_s, ch.calm_s, ch.held_t = t_s, 0.0, ch.t_m
-        ch.ratio_t = (n_m / n_p) ** 2 if n_p and n_m * n_p > 0.0 else 0.0
+        ch.ratio_t = _thrust_ratio(n_m, n_p)
 
     def _thrust_cause(self, ch: Channel, n_m: float, n_p: float, current_a: float) -> Hypothesis:
         cfg, mdl = self.config, ch.model

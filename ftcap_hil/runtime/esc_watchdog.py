@@ -166,18 +166,31 @@ class BusGuard:
     allocator's node ID (DroneCAN has no authentication), what the ESCs do and report may
     follow a stranger's commands, so neither the estimator nor the ESC evidence (silent,
     stalled) may judge the thrusters: estimation is frozen and the evidence ignored; the
-    allocation goes on within its limits. Announced once when it starts and when it ends."""
+    allocation goes on within its limits. Announced once when it starts and when it ends.
+
+    It ends ``settle_s`` after the detector last said so: each ESC judges the stranger by
+    its own detector and may go on refusing commands (zero) after the allocator's has
+    cleared (its window and clear time, 2 s + 3 s by default); an estimator resumed then
+    took every thruster for dead (seen in a loaded e2e run)."""
 
     def __init__(
-        self, transitions: TransitionLog, in_conflict: Callable[[int], bool] | None
+        self,
+        transitions: TransitionLog,
+        in_conflict: Callable[[int], bool] | None,
+        settle_s: float = 5.0,
     ) -> None:
         self._transitions = transitions
         self._in_conflict = in_conflict
+        self._settle_ns = int(settle_s * 1e9)
+        self._last_seen_ns: int | None = None
         self.episodes = 0
 
     def attacked(self, now_ns: int) -> tuple[bool, bool]:
         """(on now, just ended) at ``now_ns``."""
-        on = self._in_conflict is not None and self._in_conflict(now_ns)
+        if self._in_conflict is not None and self._in_conflict(now_ns):
+            self._last_seen_ns = now_ns
+        last = self._last_seen_ns
+        on = last is not None and now_ns - last < self._settle_ns
         was = self._transitions["can_conflict"]
         self._transitions.update(
             "can_conflict",

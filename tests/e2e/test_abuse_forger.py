@@ -97,7 +97,9 @@ def test_a_steady_odometry_forger_takes_no_thruster_out(
     the forger, and estimation freezes while two senders are on it."""
     gcs = hil.gcs()
     relay = f'["127.0.0.1:{hil.vessel_port}"]' if vessel_inbox else "[]"
-    alloc = hil.start_allocator([f"mavlink.relay={relay}"])
+    # the rig names the vessel's inbox as the telemetry source: no source, no MAVLink ODOMETRY
+    sources = [] if vessel_inbox else ["mavlink.telemetry_from=[]"]
+    alloc = hil.start_allocator([f"mavlink.relay={relay}", *sources])
     hil.start_sim()
     assert wait_until(lambda: gcs.odometry.latest() is not None, 20.0), hil.logs()
     with setpoints(gcs, tau=SURGE):

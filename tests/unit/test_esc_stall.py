@@ -19,6 +19,7 @@ from ftcap_hil.runtime.esc_watchdog import EscStallMonitor
 RANGE = np.full(4, 0.1)
 FRESH = np.zeros(4)
 MS = 1_000_000
+S = 1_000_000_000
 
 
 def monitor() -> tuple[EscStallMonitor, list[str]]:
@@ -135,3 +136,19 @@ def test_a_stalled_thruster_is_never_restored_when_the_demand_falls_short() -> N
     seen = apply_evidence(Evidence.of(m, stalled=removed), out, dead_threshold=0.1)
     assert not seen.restorable.any()
     assert seen.estimate.delta_hat[1] == 0.0 and seen.delta[1] == 0.0
+
+
+def test_the_bus_guard_holds_estimation_frozen_until_the_escs_settle() -> None:
+    """A node-ID conflict seen from 1 s to 3 s: frozen from 1 s, and still for settle_s
+    (5 s) after the detector last saw it, then over once (the ESCs judge the stranger by
+    their own detectors and may refuse commands after the allocator's has cleared)."""
+    from ftcap_hil.runtime.esc_watchdog import BusGuard
+
+    said: list[str] = []
+    guard = BusGuard(TransitionLog(lambda text, _sev: said.append(text)),
+                     lambda now: 1 * S <= now <= 3 * S)  # fmt: skip
+    states = [guard.attacked(int(t * 1e9)) for t in (0.5, 1.0, 3.0, 4.0, 7.9, 8.1, 9.0)]
+    assert states == [(False, False), (True, False), (True, False), (True, False),
+                      (True, False), (False, True), (False, False)]  # fmt: skip
+    assert [t.split(":")[0] for t in said] == ["CAN node-ID conflict", "CAN node-ID conflict over"]
+    assert guard.episodes == 1

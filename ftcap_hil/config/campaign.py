@@ -55,10 +55,20 @@ CLASSIC_KINDS = (DrawnKind.DEAD, DrawnKind.STUCK, DrawnKind.PARTIAL, DrawnKind.B
 
 
 class HarmStatistic(enum.Enum):
-    """Which statistic of a phase's deviation from the fault-free run judges harm."""
+    """Which statistic of a phase's tracking error (or deviation) judges harm."""
 
     MAX = "max"
     RMS = "rms"
+
+
+class HarmBasis(enum.Enum):
+    """What harm is judged on: the distance to the reference the operator asked for
+    (``tracking``), or to the fault-free run of the same case (``deviation``: with a model
+    error, an estimator that corrects it strays from the fault-free run while tracking
+    better, and counted as harm)."""
+
+    TRACKING = "tracking"
+    DEVIATION = "deviation"
 
 
 @dataclass(frozen=True)
@@ -74,7 +84,8 @@ class MetricParams:
     recovery_hold_s: float = 2.0  # back in the allocation, at its true effectiveness, this long
     episode_merge_s: float = 2.0  # a false flag rising this soon after the last one fell: one
     harm_ratio: float = 1.05  # harm: deviation > harm_ratio x max(CAP's, the oracle's)
-    harm_statistic: HarmStatistic = HarmStatistic.MAX  # per phase, of the deviation
+    harm_statistic: HarmStatistic = HarmStatistic.MAX  # per phase, of the tracking error
+    harm_basis: HarmBasis = HarmBasis.TRACKING
 
     def __post_init__(self) -> None:
         for name in (
@@ -90,6 +101,8 @@ class MetricParams:
             raise ValueError(f"harm_ratio: must be >= 1, got {self.harm_ratio}")
         if not isinstance(self.harm_statistic, HarmStatistic):
             raise ValueError(f"harm_statistic: a HarmStatistic, got {self.harm_statistic!r}")
+        if not isinstance(self.harm_basis, HarmBasis):
+            raise ValueError(f"harm_basis: a HarmBasis, got {self.harm_basis!r}")
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,8 @@ allocation, the effectiveness the allocator used below its dead threshold).
   that episode; removal *switches*: changes of R (in or out) on healthy thrusters. Rates per
   hour of healthy operation of the whole vessel (thruster-hours healthy / m). Time flagged /
   removed: healthy thruster-seconds.
-* Deviation: horizontal distance to the fault-free (``none``) run of the same case.
+* Deviation: horizontal distance to the fault-free (``none``) run of the same case;
+  tracking error: to the reference. Both per fault phase (RMS and max).
 
 A delay that never happens is None (JSON null).
 """
@@ -266,8 +267,16 @@ def healthy_metrics(r: _Run) -> dict[str, Any]:
     }
 
 
+def tracking_error(rec: RunRecord) -> FloatArray:
+    """(n,) horizontal distance from the reference (|x - ref_x| for the linear plant)."""
+    c = rec.columns
+    ref = c["ref_x"][:, None] if "x" in c else np.column_stack([c["ref_north"], c["ref_east"]])
+    return np.asarray(np.linalg.norm(positions(rec) - ref, axis=1))
+
+
 def _phase_rows(r: _Run) -> list[dict[str, Any]]:
     out = []
+    trk = tracking_error(r.rec)
     for start, end in r.rec.scenario.phases():
         sel = (r.t >= start) & (r.t < end)
         dev = None if r.dev is None else r.dev[sel[: r.dev.size]]
@@ -277,6 +286,8 @@ def _phase_rows(r: _Run) -> list[dict[str, Any]]:
                 "end_s": end,
                 "deviation_rms": None if dev is None else _rms(dev),
                 "deviation_max": None if dev is None or not dev.size else float(np.max(dev)),
+                "tracking_rms": _rms(trk[sel]),
+                "tracking_max": float(np.max(trk[sel])) if sel.any() else None,
             }
         )
     return out

@@ -131,12 +131,12 @@ def _failed(rows: list[Row]) -> list[str]:
 HARM_COLUMNS = (
     ("run", "key"),
     ("phase", "phase"),
-    ("dev max (m)", "deviation_max"),
-    ("dev rms (m)", "deviation_rms"),
+    ("run (m)", "run_m"),
     ("CAP (m)", "cap_m"),
     ("oracle (m)", "oracle_m"),
-    ("dev/CAP", "dev_ratio_cap"),
-    ("dev/oracle", "dev_ratio_oracle"),
+    ("run/CAP", "ratio_cap"),
+    ("run/oracle", "ratio_oracle"),
+    ("dev. from fault-free max (m)", "deviation_max"),
     ("replay", "replay"),
 )
 HEADLINE_COLUMNS = (
@@ -169,9 +169,11 @@ def _harm_section(harm: list[Row], params: MetricParams) -> list[str]:
     return [
         f"## Harm ({len(harm)} run phases)",
         "",
-        f"A run phase where a mode's {params.harm_statistic.value} deviation exceeds "
-        f"{params.harm_ratio:g} x the larger of CAP's and the oracle's in the same phase "
-        "(no floor; a healthy case's reference is its fault-free run, 0 m).",
+        f"A run phase where a mode's {params.harm_statistic.value} "
+        f"{'tracking error' if params.harm_basis.value == 'tracking' else 'deviation'} "
+        f"exceeds {params.harm_ratio:g} x the larger of CAP's and the oracle's in the same "
+        "phase (no floor; a healthy case's CAP is its fault-free run). The metres of the "
+        "run, CAP and the oracle, and the run's deviation from its fault-free run.",
         "",
         *(markdown_table(harm, HARM_COLUMNS) if harm else ["None."]),
         "",

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ftcap_hil.config.campaign import MetricParams
+from ftcap_hil.config.campaign import HarmBasis, MetricParams
 from ftcap_hil.report.intervals import poisson_rate, put_interval, wilson_share
 
 REFERENCE_MODES = ("none", "cap")
@@ -48,10 +48,11 @@ def _phase_ref(run: Row | None, j: int, stat: str) -> float | None:
 def _harm(
     row: Row, cap: Row | None, oracle: Row | None, p: MetricParams
 ) -> tuple[bool | None, list[int], list[Row]]:
-    """Phases (indices) where the run deviates more than ``harm_ratio`` x the larger of CAP's
-    and the oracle's deviation in that phase, no floor; and per phase the ratios to each
-    and the metres. A healthy case without its CAP run: CAP is the fault-free run, 0 m."""
-    stat = f"deviation_{p.harm_statistic.value}"
+    """Phases (indices) where the run's tracking error (``harm_basis``: or its deviation
+    from the fault-free run) exceeds ``harm_ratio`` x the larger of CAP's and the oracle's
+    in that phase, no floor; and per phase the metres and the ratios to each. A healthy
+    case's CAP is its fault-free run (``derive`` hands it in; for the deviation, 0 m)."""
+    stat = f"{p.harm_basis.value}_{p.harm_statistic.value}"
     if cap is None and not row["healthy"]:
         return None, [], []
     phases, detail = [], []
@@ -62,8 +63,8 @@ def _harm(
             return None, [], []
         best = max(c, o) if o is not None else c
         detail.append(
-            {"deviation_m": ph[stat], "cap_m": c, "oracle_m": o,
-             "dev_ratio_cap": _ratio(ph[stat], c), "dev_ratio_oracle": _ratio(ph[stat], o)}
+            {"run_m": ph[stat], "cap_m": c, "oracle_m": o,
+             "ratio_cap": _ratio(ph[stat], c), "ratio_oracle": _ratio(ph[stat], o)}
         )  # fmt: skip
         if ph[stat] > p.harm_ratio * best:
             phases.append(j)
@@ -84,6 +85,8 @@ def derive(rows: Iterable[Row], params: MetricParams) -> list[Row]:
         if row["status"] == "ok" and row["mode"] != "none":
             refs = by_case[row["case"]]
             cap, oracle = refs.get("cap"), refs.get("oracle")
+            if cap is None and row["healthy"] and params.harm_basis is HarmBasis.TRACKING:
+                cap = refs.get("none")  # without faults CAP is the fault-free run
             row["dev_ratio_oracle"] = _ratio(
                 row["deviation_rms"], (oracle or {}).get("deviation_rms")
             )
@@ -242,12 +245,12 @@ def harm_list(rows: list[Row]) -> list[Row]:
                 {
                     "key": row["key"],
                     "phase": f"[{ph['start_s']:g}, {ph['end_s']:g}) s",
-                    "deviation_max": ph["deviation_max"],
-                    "deviation_rms": ph["deviation_rms"],
+                    "run_m": d["run_m"],
                     "cap_m": d["cap_m"],
                     "oracle_m": d["oracle_m"],
-                    "dev_ratio_cap": d["dev_ratio_cap"],
-                    "dev_ratio_oracle": d["dev_ratio_oracle"],
+                    "ratio_cap": d["ratio_cap"],
+                    "ratio_oracle": d["ratio_oracle"],
+                    "deviation_max": ph["deviation_max"],
                     "replay": row["replay"],
                 }
             )

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from ftcap_hil.config.campaign import MetricParams
+from ftcap_hil.config.campaign import HarmBasis, MetricParams
 from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.core.faults import FaultEvent, FaultSchedule
 from ftcap_hil.core.scenario import Scenario
@@ -241,12 +241,19 @@ def test_deviation_from_the_reference_and_the_used_test() -> None:
     assert run_metrics(rec.record(), ref, PARAMS)["faults"][0]["used"] is False
 
 
-def _row(variant: str, phase_max: list[float], rms: float, healthy: bool = False) -> dict:
+def _row(
+    variant: str, phase_max: list[float], rms: float, healthy: bool = False,
+    tracking: list[float] | None = None,
+) -> dict:  # fmt: skip
+    """A run row; ``phase_max``: per phase the deviation max (its RMS half of it), and the
+    tracking error max too unless ``tracking`` gives it."""
     mode = variant if variant in ("none", "cap", "oracle") else "ftcap"
+    trk = phase_max if tracking is None else tracking
     phases = [
-        {"start_s": 10.0 * j, "end_s": 10.0 * (j + 1), "deviation_max": v, "deviation_rms": v / 2}
-        for j, v in enumerate(phase_max)
-    ]
+        {"start_s": 10.0 * j, "end_s": 10.0 * (j + 1), "deviation_max": v, "deviation_rms": v / 2,
+         "tracking_max": w, "tracking_rms": w / 2}
+        for j, (v, w) in enumerate(zip(phase_max, trk, strict=True))
+    ]  # fmt: skip
     return {
         "key": f"c/{variant}",
         "case": "c",
@@ -261,7 +268,11 @@ def _row(variant: str, phase_max: list[float], rms: float, healthy: bool = False
     }
 
 
+DEVIATION = dataclasses.replace(PARAMS, harm_basis=HarmBasis.DEVIATION)
+
+
 def test_harm_is_a_phase_worse_than_1_05_x_the_better_of_cap_and_the_oracle() -> None:
+    """On the deviation from the fault-free run (harm_basis = deviation)."""
     rows = [
         _row("cap", [0.01, 0.02, 0.001, 0.01], 0.02),
         _row("oracle", [0.005, 0.01, 0.0, 0.02], 0.01),
@@ -269,17 +280,33 @@ def test_harm_is_a_phase_worse_than_1_05_x_the_better_of_cap_and_the_oracle() ->
         # floor, 1 % of the 0.3 m hull, hid it); 1.5 x CAP but under 1.05 x the oracle: none
         _row("ftcap", [0.0105, 0.03, 0.0029, 0.015], 0.03),
     ]
-    out = {r["variant"]: r for r in derive(rows, PARAMS)}
+    out = {r["variant"]: r for r in derive(rows, DEVIATION)}
     assert out["ftcap"]["harm"] is True and out["ftcap"]["harm_phases"] == [1, 2]
     assert out["ftcap"]["dev_ratio_oracle"] == pytest.approx(3.0)
     assert out["ftcap"]["dev_ratio_cap"] == pytest.approx(1.5)
     detail = out["ftcap"]["harm_detail"][3]
-    assert detail["dev_ratio_cap"] == pytest.approx(1.5)
-    assert detail["dev_ratio_oracle"] == pytest.approx(0.75)
+    assert detail["ratio_cap"] == pytest.approx(1.5)
+    assert detail["ratio_oracle"] == pytest.approx(0.75)
     assert "harm" not in out["cap"]  # CAP is the reference
-    healthy = derive([_row("ftcap", [0.0031, 0.0], 0.001, healthy=True)], PARAMS)[0]
+    healthy = derive([_row("ftcap", [0.0031, 0.0], 0.001, healthy=True)], DEVIATION)[0]
     assert healthy["harm"] is True and healthy["harm_phases"] == [0]  # against CAP = 0
     assert healthy["dev_ratio_cap"] is None  # no CAP run, and its deviation would be 0
+
+
+def test_harm_on_tracking_does_not_count_a_better_track_away_from_the_fault_free_run() -> None:
+    """A healthy case with a model error: the fault-free run (CAP's allocation) tracks to
+    31 mm; F-TCAP, correcting the error, strays 16 mm from that run and tracks to 26 mm
+    (measured on CyberShip II in a 1.25 m/s current): harm on the deviation, none on the
+    tracking error (the default basis). 1.2x the fault-free run's tracking is harm."""
+    none = _row("none", [0.0], 0.0, healthy=True, tracking=[0.031])
+    better = _row("ftcap", [0.016], 0.01, healthy=True, tracking=[0.026])
+    worse = {**_row("ftcap", [0.016], 0.01, healthy=True, tracking=[0.0372]), "key": "c/w",
+             "variant": "ftcap-w"}  # fmt: skip
+    out = {r["variant"]: r for r in derive([none, better, worse], PARAMS)}
+    assert out["ftcap"]["harm"] is False
+    assert out["ftcap"]["harm_detail"][0]["ratio_cap"] == pytest.approx(0.026 / 0.031)
+    assert out["ftcap-w"]["harm"] is True
+    assert derive([none, better], DEVIATION)[1]["harm"] is True  # the old basis's verdict
 
 
 def test_harm_unknown_when_the_cap_run_failed() -> None:

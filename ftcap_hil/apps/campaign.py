@@ -88,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
         "ran": len(written),
         "wall_s": wall,
         "tuning_seeds": list(spec.tuning_seeds),
+        "scenarios": [s.label for s in spec.scenarios],
         "scheduler": args.scheduler
         or f"an embedded LocalCluster ({args.workers or 'one per core'} workers)",
     }

@@ -287,8 +287,11 @@ def write_report(
     rows: list[Row], params: MetricParams, out_dir: Path, info: dict[str, Any], plots: bool = True
 ) -> list[Path]:
     """Every output of a campaign from its rows (tables, summary.md, the plots and
-    report.md linking them); returns the paths written."""
-    rows = derive(rows, params)
+    report.md linking them); returns the paths written. ``info["scenarios"]``: the
+    campaign's scenario labels in its order, which the tables follow (else first seen)."""
+    order = list(info.get("scenarios") or [])
+    rank = {label: k for k, label in enumerate(order)}
+    rows = sorted(derive(rows, params), key=lambda r: rank.get(r["scenario"], len(order)))
     written = write_tables(rows, out_dir)
     (out_dir / "summary.md").write_text(summary_markdown(rows, params, info))
     written.append(out_dir / "summary.md")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 import re
 import struct
 import subprocess
@@ -168,9 +169,13 @@ def test_a_shared_or_planted_cache_is_never_imported_from(tmp_path, monkeypatch,
 
 
 def test_install_writes_a_module_pymavlink_tools_import(tmp_path) -> None:
-    written = mavlink_dialect.install(tmp_path)
-    assert sorted(p.name for p in written) == ["ftcap.py", "ftcap.xml"]
-    spec = importlib.util.spec_from_file_location("ftcap_installed", tmp_path / "ftcap.py")
+    written = mavlink_dialect.install(tmp_path / "v20")
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in written) == [
+        "v10/ftcap.py",
+        "v20/ftcap.py",
+        "v20/ftcap.xml",
+    ]
+    spec = importlib.util.spec_from_file_location("ftcap_installed", tmp_path / "v20/ftcap.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -194,3 +199,46 @@ def test_installed_dialect_lets_mavlogdump_decode_our_messages(tmp_path) -> None
         capture_output=True, text=True, timeout=120, check=True,
     )  # fmt: skip
     assert "FTCAP_THRUST" in shown.stdout and "UNKNOWN" not in shown.stdout
+
+
+_MAVUTIL_READER = """
+import os, sys
+from pathlib import Path
+import pymavlink.dialects.v10 as v10, pymavlink.dialects.v20 as v20
+root = Path(sys.argv[1])
+v20.__path__.insert(0, str(root / "v20"))  # the installed dialect, without touching the venv
+v10.__path__.insert(0, str(root / "v10"))
+from pymavlink import mavutil
+log = mavutil.mavlink_connection(sys.argv[2])
+msg = log.recv_match()
+print(mavutil.current_dialect, msg.get_type(), msg.surge, flush=True)
+"""
+
+
+@pytest.mark.parametrize("mavlink20", [True, False], ids=["MAVLINK20", "no-MAVLINK20"])
+def test_installed_dialect_decodes_a_log_with_mavlink_dialect_set(tmp_path, mavlink20) -> None:
+    # Issue 22: `MAVLINK_DIALECT=ftcap` (docs/hil.md) raised in mavutil's import unless
+    # MAVLINK20 was also set: mavutil looks in dialects/v10 first, where nothing was installed.
+    written = mavlink_dialect.install(tmp_path / "v20")
+    assert [p.relative_to(tmp_path).as_posix() for p in written] == [
+        "v20/ftcap.py",
+        "v20/ftcap.xml",
+        "v10/ftcap.py",
+    ]
+    mav = DIALECT.MAVLink(None, srcSystem=1, srcComponent=191)
+    frame = DIALECT.MAVLink_wrench_setpoint_message(1, 1, 191, 1.5, -2.0, 3.25).pack(mav)
+    tlog = tmp_path / "flight.tlog"
+    tlog.write_bytes(struct.pack(">Q", 1_700_000_000_000_000) + bytes(frame))
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MAVLINK")}
+    env["MAVLINK_DIALECT"] = "ftcap"
+    if mavlink20:
+        env["MAVLINK20"] = "1"
+    out = subprocess.run(
+        [sys.executable, "-c", _MAVUTIL_READER, str(tmp_path), str(tlog)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["ftcap", "WRENCH_SETPOINT", "1.5"]

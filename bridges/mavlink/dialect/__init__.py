@@ -220,14 +220,33 @@ def share(module: Path) -> None:
     module.parent.chmod(0o755)
 
 
+V10_ALIAS = '''"""The ftcap dialect for a mavutil program started without MAVLINK20 (written by
+``python -m bridges.mavlink.dialect --install``): the project's messages exist in MAVLink 2
+only (ids above 255), so this is the MAVLink 2 module. Its codec reads MAVLink 1 frames too,
+and mavutil switches to MAVLink 2 at the first MAVLink 2 frame."""
+
+import sys
+
+from pymavlink.dialects.v20 import ftcap as _v20
+
+sys.modules[__name__] = _v20
+'''
+
+
 def install(directory: Path | None = None) -> list[Path]:
     """Write ``ftcap.py`` and ``ftcap.xml`` into ``directory`` (default: the installed
-    pymavlink's ``dialects/v20``), where ``mavutil.set_dialect("ftcap")`` imports them from.
-    Returns the paths written; OSError if the directory is not writable."""
+    pymavlink's ``dialects/v20``), where ``mavutil.set_dialect("ftcap")`` imports them from,
+    and the alias module ``V10_ALIAS`` as ``ftcap.py`` in the sibling ``v10`` directory, where
+    ``MAVLINK_DIALECT=ftcap`` without ``MAVLINK20`` looks first (mavutil's import would
+    otherwise raise). Returns the paths written; OSError if a directory is not writable."""
     target_dir = directory or pymavlink_definitions_dir()
     target_dir.mkdir(parents=True, exist_ok=True)
     module = target_dir / "ftcap.py"
     write_atomically(module, render(), mode=0o644)
     xml = target_dir / "ftcap.xml"
     shutil.copyfile(XML, xml)
-    return [module, xml]
+    alias_dir = target_dir.parent / "v10"
+    alias_dir.mkdir(exist_ok=True)
+    alias = alias_dir / "ftcap.py"
+    write_atomically(alias, V10_ALIAS, mode=0o644)
+    return [module, xml, alias]

@@ -6,7 +6,8 @@ image built at install time by root and run by another user. ``--out DIR`` write
 ``DIR/ftcap.py``. ``--install`` writes ``ftcap.py`` (and the XML)
 into the installed pymavlink's ``dialects/v20`` so that pymavlink's tools decode the
 project's messages: ``mavproxy.py --dialect=ftcap``, ``mavlogdump.py --dialect ftcap``, or
-``MAVLINK_DIALECT=ftcap`` for any ``mavutil`` program.
+``MAVLINK_DIALECT=ftcap`` for any other ``mavutil`` program (with or without ``MAVLINK20``;
+mavlogdump ignores the variable: its ``--dialect`` defaults to ardupilotmega).
 """
 
 from __future__ import annotations
@@ -35,7 +36,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.install:
             for path in install(args.dir):
                 sys.stdout.write(f"{path}\n")
-            sys.stdout.write("use: mavproxy.py --dialect=ftcap, mavlogdump.py --dialect ftcap\n")
+            sys.stdout.write(
+                "use: mavproxy.py --dialect=ftcap, mavlogdump.py --dialect ftcap, "
+                "MAVLINK_DIALECT=ftcap for other mavutil programs\n"
+            )
             return 0
         if args.out is None:
             path = Path(str(load().__file__))

@@ -19,6 +19,7 @@ import os
 import re
 import signal
 import socket
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -182,10 +183,10 @@ def run_latency(args: argparse.Namespace) -> None:
     from bridges.zenoh_io.link import ZenohGcsLink, make_config
 
     mav_port, gcs_port, z_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
-    with HubProcess() as hub:
-        proc = start_allocator(
-            hub.channel, args.rate_hz, mav_port, gcs_port, z_port, "/tmp/bench-allocator.log"
-        )
+    logs = tempfile.TemporaryDirectory(prefix="ftcap-bench-")  # private, never a fixed name
+    with logs, HubProcess() as hub:
+        log_path = str(Path(logs.name) / "allocator.log")
+        proc = start_allocator(hub.channel, args.rate_hz, mav_port, gcs_port, z_port, log_path)
         tap = RawCommandTap()
         bus = CanHubBus(channel=hub.channel)
         notifier = can.Notifier(bus, [tap])
@@ -222,8 +223,8 @@ def run_rate(args: argparse.Namespace) -> None:
     from bridges.mavlink.gcs import MavlinkGcsLink
 
     mav_port, gcs_port, z_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
-    log_path = "/tmp/bench-allocator-rate.log"
-    with HubProcess() as hub:
+    with tempfile.TemporaryDirectory(prefix="ftcap-bench-") as logs, HubProcess() as hub:
+        log_path = str(Path(logs) / "allocator.log")
         proc = start_allocator(hub.channel, args.rate_hz, mav_port, gcs_port, z_port, log_path)
         gcs = MavlinkGcsLink(MavlinkEndpoint.inbox(gcs_port, (255, 190), (mav_port,)))
         try:
@@ -236,7 +237,7 @@ def run_rate(args: argparse.Namespace) -> None:
         finally:
             gcs.shutdown()
             stop(proc)
-    text = open(log_path).read()
+        text = Path(log_path).read_text()
     m = re.search(r"stopped after (\d+) cycles, (\d+) overruns", text)
     if not m:
         print(text[-2000:])

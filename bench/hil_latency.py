@@ -183,9 +183,8 @@ def run_latency(args: argparse.Namespace) -> None:
     from bridges.zenoh_io.link import ZenohGcsLink, make_config
 
     mav_port, gcs_port, z_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
-    logs = tempfile.TemporaryDirectory(prefix="ftcap-bench-")  # private, never a fixed name
-    with logs, HubProcess() as hub:
-        log_path = str(Path(logs.name) / "allocator.log")
+    with tempfile.TemporaryDirectory(prefix="ftcap-bench-") as logs, HubProcess() as hub:
+        log_path = str(Path(logs) / "allocator.log")  # private, never a fixed name
         proc = start_allocator(hub.channel, args.rate_hz, mav_port, gcs_port, z_port, log_path)
         tap = RawCommandTap()
         bus = CanHubBus(channel=hub.channel)

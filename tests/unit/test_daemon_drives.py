@@ -93,6 +93,7 @@ def test_esc_status_reaches_the_shaft_diagnosis_and_silence_is_not_a_dead_thrust
     assert daemon.drive.diagnosing and daemon.core.shaft is not None
     tau = np.array([2.0, 0.0, 0.0])  # ahead: both propellers commanded
     now = 10 * S
+    speeds = np.zeros(len(boxes))  # each drive's speed, lagging its command as a drive does
     for k in range(40):  # 4 s at 10 Hz, the statuses of the commands in force
         now = 10 * S + k * S // 10
         sp.put(WrenchSetpoint(tau), now)
@@ -100,12 +101,14 @@ def test_esc_status_reaches_the_shaft_diagnosis_and_silence_is_not_a_dead_thrust
         for i, box in enumerate(boxes):
             drive = daemon.config.drives[i]  # type: ignore[index]
             if drive.is_shaft:
-                n = np.sign(u[i]) * np.sqrt(abs(u[i]) / drive.k_thrust)
+                ref = np.sign(u[i]) * np.sqrt(abs(u[i]) / drive.k_thrust)
+                speeds[i] += min(0.1 / drive.time_constant_s, 1.0) * (ref - speeds[i])
+                n = speeds[i]
                 rpm = 0.0 if i == 1 else esc_rpm(n, True)  # starboard: 0 rpm
                 amps = drive.idle_a + (abs(u[i]) * abs(n) * 0.3 if i != 1 else 0.0)
             else:
                 rpm, amps = esc_rpm(u[i] / drive.full_force_n, False), 0.1
-            box.put(EscStatus(i, round(rpm), amps, 12.0), now - 20_000_000)
+            box.put(EscStatus(i, round(rpm), amps, 12.0), now)
         result = daemon.cycle(now)
     assert daemon.drive.received == 40 * 5
     assert result is not None and result.shaft is not None

@@ -197,7 +197,11 @@ def _write(tmp_path: Path, old: str, new: str) -> Path:
             r"diameter_m: missing \('diameter' is given",
         ),
         ("rate_hz = 2.0", "rate = 2.0", r"\[telemetry\] unknown key 'rate'"),
-        ("cusum_h = 23.67", "cusum = 23.67", r"\[diagnosis\] unknown key 'cusum'"),
+        (
+            "telemetry_timeout_s = 2.5",
+            "telemetry_timeout = 2.5",
+            r"\[diagnosis\] unknown key 'telemetry_timeout'",
+        ),
     ],
 )
 def test_a_bad_preset_names_its_file_table_and_key(

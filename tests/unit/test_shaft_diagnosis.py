@@ -58,9 +58,11 @@ class Run:
 def fly(
     cause: Cause, delta: float, onset: float = 20.0, end: float = math.inf, T: float = 40.0,
     seed: int = 0, actuator: Propeller | Servo = PROP, model: DriveModel | None = None,
+    level: float = 2.0,
 ) -> Run:  # fmt: skip
-    """One thruster on a slowly varying command (2 +- 1 N, 20 s period, noise), the fault
-    ``cause`` at ``delta`` from ``onset`` to ``end``; the diagnoser's verdict every step."""
+    """One thruster on a slowly varying command (``level`` +- 50 %, 20 s period, 5 % noise;
+    by default 2 +- 1 N of 4 N), the fault ``cause`` at ``delta`` from ``onset`` to ``end``;
+    the diagnoser's verdict every step."""
     rng = np.random.default_rng(seed)
     bank = ThrusterBank(ThrusterBankConfig.create(
         1, time_constant_s=TC, actuator=actuator, full_force_n=FULL, u_max_abs=FULL, seed=seed,
@@ -72,7 +74,7 @@ def fly(
     for k in range(int(T / DT)):
         t = k * DT
         if k % 10 == 0:
-            u = 2.0 + math.sin(2 * math.pi * t / 20) + rng.normal(0, 0.1)
+            u = level * (1.0 + 0.5 * math.sin(2 * math.pi * t / 20) + rng.normal(0, 0.05))
         on = onset <= t < end
         truth = Truth(
             np.array([delta if on else 1.0]), np.zeros(1),
@@ -114,6 +116,47 @@ def test_each_shaft_visible_fault_is_named(
     assert run.raised_before(20.0) <= {Hypothesis.HEALTHY}
     assert run.first(20.0, hyp) <= within_s
     assert run.at(39.9)[0] is hyp
+
+
+@pytest.mark.parametrize("share", [0.01, 0.03])
+@pytest.mark.parametrize(
+    ("cause", "hyp"), [(Cause.DRIVE_DEAD, Hypothesis.DRIVE_DEAD), (Cause.JAMMED, Hypothesis.JAMMED)]
+)
+def test_a_thruster_at_a_few_percent_of_its_rating_is_judged(
+    share: float, cause: Cause, hyp: Hypothesis
+) -> None:
+    """A DP vessel in light weather: 1-3 % of the rated force is 10-17 % of the rated speed,
+    hundreds of rpm, far above the telemetry's 1 rpm. A shaft at 0 rpm there is dozens of
+    bands off the prediction, and is named within a second; the healthy hour stays quiet."""
+    for seed in range(3):
+        assert fly(Cause.HEALTHY, 1.0, seed=seed, level=share * FULL).raised_before(math.inf) <= {
+            Hypothesis.HEALTHY
+        }
+    run = fly(cause, 0.0, level=share * FULL)
+    assert run.raised_before(20.0) <= {Hypothesis.HEALTHY}
+    assert run.first(20.0, hyp) <= 1.0
+    assert run.at(39.9) == (hyp, 0.0)
+
+
+def test_after_a_telemetry_gap_the_prediction_restarts_from_the_measured_speed() -> None:
+    """The drive rebooted during a 2 s gap in its telemetry: it spins up again from 0 along
+    its lag. Judged against the stale prediction (full speed all along) that spin-up reads
+    as a dead drive; restarted from the measured speed, it is healthy."""
+    model = data_sheet(1.0, 1.0, 1.0)
+    diag = ShaftDiagnoser([model], DiagnosisConfig(band_rel=0.02, band_res=1.0))
+    u, n_ref = 2.0, math.sqrt(2.0 / model.k_thrust)
+    n, seen = 0.0, set()
+    for k in range(int(20.0 / DT)):
+        t = k * DT
+        if 5.0 <= t < 7.0:
+            n = 0.0  # the drive is down and says nothing
+        else:
+            n += DT / model.time_constant_s * (n_ref - n)
+        diag.command(t, np.array([u]))
+        if k % 10 == 0 and not 5.0 <= t < 7.0:
+            diag.feedback(t + DT, 0, round(n * 60.0) / 60.0, math.nan)
+        seen.add(diag.verdict(t + DT).hypothesis[0])
+    assert seen <= {Hypothesis.HEALTHY, Hypothesis.TELEMETRY_LOST}
 
 
 def test_shown_effectiveness_of_partial_losses() -> None:

@@ -6,37 +6,46 @@ k_Q = K_Q0 rho D^5 of the propeller, the drive's time constant, the motor's effi
 supply voltage and idle current (a servo: its force at full deflection and time constant).
 It never sees the simulator's truth. From the commands it sent it predicts the speed the
 drive should have (a first-order lag of n_ref = sign(u) sqrt(|u| / k_T), or for a servo of
-u / full force) and compares every telemetry sample with it, at the sample's own time::
+u / full force) and compares every telemetry sample with it, at the sample's own time, in the
+quantity the drive measures: its speed, at the speed it runs::
 
-    r_T = sgn(T_p) (T_m - T_p) / sigma_T             thrust implied by the speed, T = k_T n|n|,
-                                                      against the lagged command's (N): a
-                                                      deficit is negative either way round
+    r_n = sgn(n_p) (n_m - n_p) / sigma_n             the measured speed against the lagged
+                                                      command's (rev/s): a deficit is
+                                                      negative either way round
     r_Q = (I_m - I(n_m)) / sigma_I                    the current against what the load at
                                                       the measured speed draws (A)
-    sigma_T = band_rel |T_p| + band_abs full, and T_m - T_p taken from the nearest of
-              the predictions with the lag T_n (1 + lag_uncertainty)^(+-1) and within
-              +-timing_s (the drive's lag and the sample's time are known no better)
+    sigma_n = band_rel |n_p| + band_res speed_resolution, and n_m - n_p taken from the
+              nearest of the predictions with the lag T_n (1 + lag_uncertainty)^(+-1) and
+              within +-timing_s (the drive's lag and the sample's time are known no better)
     sigma_I = current_rel (I(n_m) - I_idle) + current_abs
 
-Each residual feeds two one-sided CUSUMs, S <- max(0, S + |r| - k) on its own side, updated
-only while the thruster is commanded above ``floor_rel`` of its full force (below it the
-speed says little: PX4's motor-failure check keeps a throttle floor for the same reason);
-an alarm is S > h. From the alarms, the measured speed and current, one hypothesis per
-thruster (:class:`Hypothesis`) and the effectiveness its drive shows::
+The band is what the telemetry resolves at the operating point (the data sheet's share of
+the speed, the lag, the reading's resolution), never a share of the rating: a DP thruster
+at 1 % of its rated force turns at 10 % of its rated speed, tens of resolution steps, and
+a shaft reading 0 rpm there is dozens of bands off. Each residual feeds two one-sided
+CUSUMs, S <- max(0, S + |r| - k) on its own side (one sample moves S by at most 0.6 h),
+updated while the shaft should be turning measurably: the whole predicted range one way
+and ``floor_z`` bands from zero; the load's only while the speed fits (within
+``clear_z``): a load hypothesis needs a shaft turning as commanded. After a telemetry gap
+the prediction restarts from the measured speed. An alarm is S > h (``cusum_h`` for the
+speed, ``load_h`` for the load). From the alarms, the measured speed and current, one
+hypothesis per thruster (:class:`Hypothesis`) and the effectiveness its drive shows::
 
     no telemetry for telemetry_timeout_s        TELEMETRY_LOST  (not a thruster fault: 1)
-    thrust low, |n_m| ~ 0, current near idle     DRIVE_DEAD      0
-    thrust low, |n_m| ~ 0, current drawn         JAMMED          0
+    speed off, |n_m| ~ 0, current near idle      DRIVE_DEAD      0
+    speed off, |n_m| ~ 0, current drawn          JAMMED          0
     speed flat while the command moves           STUCK           0, its held force k_T n_m|n_m|
-    thrust low, load consistent                  WEAK            (n_m / n_p)^2
+    speed low, load consistent                   WEAK            (n_m / n_p)^2
     load low for hold_s, thrust consistent       LOAD_LOSS       torque ratio (lost blade)
     load high for hold_s                         LOAD_GAIN       2 - torque ratio (fouling)
     load low for less than hold_s                VENTILATION     1 (transient: never removed)
 
+in that order: a shaft at 0 rpm under command is dead or jammed whatever its load says.
+
 An alarm clears once the residuals stay within ``clear_z`` for ``clear_s`` of commanded
-time; a thruster that is not turning is seen again only when it is commanded (the cycle's
-probes). Thresholds are not tuned here: they come from healthy runs on calibration seeds
-(``bench/calibrate_shaft.py``). Pure: the time is handed in, no clock, no I/O.
+time; a thruster that is not turning is seen again whenever it is commanded to turn
+measurably (the cycle's probes). Thresholds are not tuned here: they come from healthy runs
+on calibration seeds (``bench/calibrate_shaft.py``). Pure: the time is handed in, no clock, no I/O.
 """
 
 from __future__ import annotations
@@ -49,7 +58,7 @@ import numpy as np
 
 from ftcap_hil.core.estimation.shaft_channel import Channel
 from ftcap_hil.core.estimation.shaft_types import (
-    NOT_TURNING,
+    LOAD,
     DiagnosisConfig,
     DriveModel,
     DriveReport,
@@ -84,15 +93,18 @@ def _thrust_ratio(n_m: float, n_p: float) -> float:
 @dataclass(frozen=True)
 class ResidualSample:
     """One healthy, commanded sample's raw residuals: thruster ``index`` at ``t_s``, the
-    predicted thrust (N) and the thrust error outside the prediction's range (N, signed as
-    the thrust), the predicted load current above idle and its error (A, NaN: none)."""
+    predicted speed (rev/s; a servo: deflection) and the speed error outside the
+    prediction's range (signed as the speed), the predicted load current above idle and its
+    error (A, NaN: none), and the speed map's uncertainty that widened the band."""
 
     index: int
     t_s: float
-    thrust_n: float
-    thrust_error_n: float
+    speed: float
+    speed_error: float
     load_a: float
     load_error_a: float
+    speed_spread: float = 0.0  # the speed map's own uncertainty there (rev/s)
+    shaft: bool = True  # False: a servo (its deflection, its own bands)
 
 
 class ShaftDiagnoser:
@@ -124,23 +136,26 @@ class ShaftDiagnoser:
         ch, cfg = self._ch[index], self.config
         t_s = t_received_s - cfg.latency_s
         t_measured_s = t_received_s
+        if t_measured_s - ch.last_sample_s > cfg.telemetry_timeout_s:
+            ch.restart(t_s, speed)  # after a gap: the drive is where it says, not predicted
         ch.advance(t_received_s)
         speeds = ch.predicted_at(t_s)
-        n_p = ch.speed_scale * speeds[0]
-        t_p = ch.open_water(n_p)
-        mdl = ch.model
-        t_m = ch.open_water(speed)
-        sigma_t = cfg.band_rel * abs(t_p) + cfg.band_abs * mdl.full_force_n
+        smap = ch.speed_map
+        n_p = smap.speed(speeds[0])
         # what the prediction says for a faster or slower drive, and within +-timing_s:
         # a measurement inside that range is no evidence
         shifted = (ch.predicted_at(t_s + d)[0] for d in (-cfg.timing_s, cfg.timing_s))
-        around = [ch.open_water(ch.speed_scale * n) for n in (*speeds[1:], *shifted)]
-        lo, hi = min(t_p, *around), max(t_p, *around)
-        # in the direction of the predicted thrust: a deficit is negative either way round
-        ch.r_t = math.copysign(1.0, t_p) * (t_m - min(max(t_m, lo), hi)) / sigma_t
-        ch.t_m, ch.t_p, ch.sig_t = t_m, t_p, sigma_t
-        ch.steady = hi - lo <= 0.1 * abs(t_p)
+        around = [smap.speed(n) for n in (*speeds[1:], *shifted)]
+        lo, hi = min(n_p, *around), max(n_p, *around)
+        rel, resolved = ch.bands
+        band = rel * abs(n_p) + resolved  # what the telemetry resolves there
+        sigma_n = band + smap.spread(speeds[0])  # and what the speed map does not know yet
+        # in the direction of the predicted speed: a deficit is negative either way round
+        ch.r_t = math.copysign(1.0, n_p) * (speed - min(max(speed, lo), hi)) / sigma_n
+        ch.n_p, ch.x_p, ch.sig_n, ch.band_n, ch.range_n = n_p, speeds[0], sigma_n, band, hi - lo
+        ch.t_m, ch.t_p = ch.open_water(speed), ch.open_water(n_p)
         ch.r_q = math.nan
+        mdl = ch.model
         if ch.load_visible and math.isfinite(current_a):
             i_pred = ch.current_at(speed)
             sigma_i = cfg.current_rel * (i_pred - mdl.idle_a) + cfg.current_abs
@@ -148,21 +163,25 @@ class ShaftDiagnoser:
             ch.i_m, ch.i_pred, ch.sig_i = current_a, i_pred, sigma_i
         ch.speed_m = speed
         ch.last_sample_s = t_measured_s
-        ch.thrust_sum += t_m
+        ch.thrust_sum += ch.t_m
         ch.thrust_count += 1
-        floor = cfg.probe_rel if ch.hyp in NOT_TURNING else cfg.floor_rel
-        commanded = abs(t_p) >= floor * mdl.full_force_n
-        if self.trace is not None and commanded and ch.hyp is Hypothesis.HEALTHY:
+        # turning measurably: the whole predicted range one way, floor_z bands from zero
+        least = min(abs(lo), abs(hi)) if lo * hi > 0.0 else 0.0
+        commanded = least >= cfg.floor_z * (rel * least + resolved)
+        healthy = ch.hyp is Hypothesis.HEALTHY
+        tested = self._judge(ch, t_measured_s, speed, n_p, current_a, commanded)
+        if self.trace is not None and tested and healthy:
             self.trace.append(ResidualSample(
-                index, t_measured_s, t_p, ch.r_t * sigma_t, ch.i_pred - mdl.idle_a,
+                index, t_measured_s, n_p, ch.r_t * sigma_n, ch.i_pred - mdl.idle_a,
                 ch.r_q * ch.sig_i if math.isfinite(ch.r_q) else math.nan,
+                sigma_n - ch.band_n, mdl.is_shaft,
             ))  # fmt: skip
-        self._judge(ch, t_measured_s, speed, n_p, current_a, commanded)
 
     def _judge(
         self, ch: Channel, t_s: float, n_m: float, n_p: float, current_a: float,
         commanded: bool,
-    ) -> None:  # fmt: skip
+    ) -> bool:  # fmt: skip
+        """One sample judged; True if it fed the tests (commanded, commissioned)."""
         cfg = self.config
         if ch.hyp is Hypothesis.TELEMETRY_LOST:
             ch.hyp = Hypothesis.HEALTHY
@@ -170,10 +189,14 @@ class ShaftDiagnoser:
         while ch.recent and ch.recent[0][0] < t_s - cfg.stuck_window_s:
             ch.recent.popleft()
         if not commanded and ch.hyp not in (Hypothesis.STUCK,):
-            return  # little evidence either way: hold the decision and the tests
-        ch.thrust.update(ch.r_t, cfg.cusum_k)
-        if math.isfinite(ch.r_q):
-            ch.load.update(ch.r_q, cfg.cusum_k)
+            return False  # little evidence either way: hold the decision and the tests
+        # one sample moves a CUSUM by at most 0.6 h: no single reading raises an alarm
+        cap = 0.6 * cfg.cusum_h + cfg.cusum_k
+        ch.thrust.update(min(max(ch.r_t, -cap), cap), cfg.cusum_k)
+        fits = abs(ch.r_t) < cfg.clear_z  # the load is judged only where the speed fits
+        if math.isfinite(ch.r_q) and fits:
+            cap = 0.6 * cfg.load_h + cfg.cusum_k
+            ch.load.update(min(max(ch.r_q, -cap), cap), cfg.cusum_k)
         if n_p:
             ch.ratio_t += 0.2 * (_thrust_ratio(n_m, n_p) - ch.ratio_t)
         if math.isfinite(ch.r_q):
@@ -183,47 +206,57 @@ class ShaftDiagnoser:
         if ch.hyp is Hypothesis.HEALTHY:
             commissioning = ch.seen < cfg.cal_samples
             ch.seen += 1
-            quiet = abs(ch.r_t) < cfg.clear_z
             gap = self._sample_gap(ch)
-            if ch.steady and (quiet or commissioning):
-                ch.calibrate(gap, n_m, n_p / ch.speed_scale)
+            # every healthy sample, its innovation clipped (a fault is learnt no faster than
+            # the map may walk, a wrong start is unlearnt all the same), but a shaft held
+            # still while its command moves: the stuck test's signature
+            if commissioning or not self._flat(ch):
+                error = math.copysign(1.0, n_p) * ch.r_t * ch.sig_n  # outside the lag's range
+                # a sample in a transient, where the lag's range is wide, weighs little
+                ch.speed_map.learn(gap, ch.x_p, error, ch.band_n + ch.range_n)
             if ch.load_visible and math.isfinite(current_a):
                 ch.load_model.learn(gap, n_m, current_a)  # a static map: any healthy sample
             if commissioning:
                 ch.thrust.reset()  # the tests start on the calibrated model
                 ch.load.reset()
-                return
+                return False
             self._raise(ch, t_s, n_m, n_p, current_a)
         else:
             self._follow(ch, t_s, n_m, n_p, current_a)
+        return True
 
     def _raise(self, ch: Channel, t_s: float, n_m: float, n_p: float, current_a: float) -> None:
         """A healthy thruster's tests: which alarm, if any, starts an episode."""
-        h = self.config.cusum_h
+        h, h_load = self.config.cusum_h, self.config.load_h
         if ch.thrust.high > h and not ch.thrust.low > h and not self._flat(ch):
             ch.thrust.high = 0.0  # more thrust than asked and following the command: no fault
         if ch.thrust.low > h or ch.thrust.high > h:
             ch.hyp = self._thrust_cause(ch, n_m, n_p, current_a)
-        elif ch.load.low > h:
+        elif ch.load.low > h_load:
             ch.hyp = Hypothesis.VENTILATION
-        elif ch.load.high > h:
+        elif ch.load.high > h_load:
             ch.hyp = Hypothesis.VENTILATION  # a load step: confirmed as fouling after hold_s
         else:
             return
-        ch.since_s, ch.calm_s, ch.held_t = t_s, 0.0, ch.t_m
+        ch.since_s, ch.calm_s, ch.held_n = t_s, 0.0, n_m
         ch.ratio_t = _thrust_ratio(n_m, n_p)
 
     def _thrust_cause(self, ch: Channel, n_m: float, n_p: float, current_a: float) -> Hypothesis:
+        """In physical order: a shaft that does not turn under command is dead or jammed
+        whatever else it shows; then a speed that holds while the command moves; then weak."""
         cfg, mdl = self.config, ch.model
-        if self._flat(ch):
-            return Hypothesis.STUCK
         if abs(n_m) < cfg.stall_rel * abs(n_p):
             if not mdl.is_shaft:
                 return Hypothesis.DRIVE_DEAD
+            # drawing current: a share of what the commanded speed draws, and measurably
+            # (floor_z bands) above idle: at 1 % of the rating that share is in the noise
             drawn = ch.current_at(n_p) - mdl.idle_a
-            if math.isfinite(current_a) and current_a - mdl.idle_a > cfg.jam_current_rel * drawn:
+            least = max(cfg.jam_current_rel * drawn, cfg.floor_z * cfg.current_abs)
+            if math.isfinite(current_a) and current_a - mdl.idle_a > least:
                 return Hypothesis.JAMMED
             return Hypothesis.DRIVE_DEAD
+        if self._flat(ch):
+            return Hypothesis.STUCK
         return Hypothesis.WEAK
 
     def _flat(self, ch: Channel) -> bool:
@@ -251,13 +284,13 @@ class ShaftDiagnoser:
             ch.load.reset()
             ch.ratio_t = ch.ratio_q = 1.0
             return
-        h = cfg.cusum_h
+        h, h_load = cfg.cusum_h, cfg.load_h
         if ch.hyp is Hypothesis.VENTILATION and t_s - ch.since_s >= cfg.hold_s:
-            if ch.load.low > h:
+            if ch.load.low > h_load:
                 ch.hyp = Hypothesis.LOAD_LOSS
-            elif ch.load.high > h:
+            elif ch.load.high > h_load:
                 ch.hyp = Hypothesis.LOAD_GAIN
-        elif ch.hyp in (Hypothesis.WEAK, Hypothesis.VENTILATION):
+        elif ch.hyp in (Hypothesis.WEAK, Hypothesis.VENTILATION, *LOAD):
             if ch.thrust.high > h and not ch.thrust.low > h and not self._flat(ch):
                 ch.thrust.high = 0.0  # more thrust than asked, following the command
             if ch.thrust.low > h or ch.thrust.high > h:
@@ -278,8 +311,8 @@ class ShaftDiagnoser:
             gone = abs(ch.ratio_q - 1.0) < 0.15  # the fault's own estimate is back
             return abs(ch.r_q) < z_clear and (gone or abs(ch.r_q) < abs(z_fault))
         shown = _effectiveness(ch.hyp, ch)
-        fault = ch.held_t if ch.hyp is Hypothesis.STUCK else shown * ch.t_p
-        z_fault = (ch.t_m - fault) / ch.sig_t
+        fault = ch.held_n if ch.hyp is Hypothesis.STUCK else math.sqrt(shown) * ch.n_p
+        z_fault = (ch.speed_m - fault) / ch.sig_n
         gone = ch.hyp is Hypothesis.WEAK and shown > 0.9
         return abs(ch.r_t) < z_clear and (gone or abs(ch.r_t) < abs(z_fault))
 

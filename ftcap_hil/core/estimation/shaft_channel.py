@@ -86,6 +86,73 @@ class LoadModel:
         self.theta = np.array([min(max(a, lo), hi), min(max(c, -0.3), 0.3), o])
 
 
+class SpeedMap:
+    """The speed a healthy drive reaches for a data-sheet speed x, learnt on healthy data as
+    a small Kalman filter of three coefficients, as :class:`LoadModel`::
+
+        n = s_ahead max(x, 0) + s_astern min(x, 0) + o
+
+    ``s_*`` the data sheet's error ahead and astern (within ``cal_limit`` of 1: a propeller
+    is not symmetric), ``o`` the in-flow's offset (rev/s; 2 % of the full speed a priori,
+    at most 10 %): a torque-controlled drive in an axial in-flow V_a settles near
+    n_ref + V_a / (2 J_Q D) in either direction, so a current or the hull's own motion
+    shifts its speed by an amount that does not scale with it. The scales are constants of
+    the drive, learnt once; the offset walks by its prior's size over ``cal_tau_s``, as the
+    in-flow does. Each sample teaches only what the drive's lag cannot explain (the error
+    outside the prediction's range): a reversal in progress says nothing about the scales.
+    Innovations are clipped to ``clear_z`` of their spread, so a fault is learnt no faster
+    than the coefficients may walk. ``spread(x)`` is the map's own
+    remaining uncertainty there: large in a direction or at a speed it has not yet been
+    calibrated on. A servo's position loop knows no in-flow and its travel no data-sheet
+    scale: its map does not learn (the identity, no spread)."""
+
+    def __init__(self, cfg: DiagnosisConfig, n_full: float, learns: bool = True) -> None:
+        self.cfg = cfg
+        self.n_full = max(n_full, 1e-12)
+        self.theta = np.array([1.0, 1.0, 0.0])
+        prior = [cfg.cal_limit**2, cfg.cal_limit**2, (0.02 * self.n_full) ** 2]
+        self._prior = np.array(prior if learns else [0.0, 0.0, 0.0])
+        self.P = np.diag(self._prior)
+        self.learns = learns
+
+    @staticmethod
+    def _phi(x: float) -> np.ndarray:
+        return np.array([max(x, 0.0), min(x, 0.0), 1.0])
+
+    def speed(self, x: float) -> float:
+        """The healthy speed for the data-sheet speed ``x`` (0 at 0: no command, no test)."""
+        return float(self._phi(x) @ self.theta) if x else 0.0
+
+    def data_sheet(self, n: float) -> float:
+        """The data-sheet speed that maps to the measured ``n`` (the inverse of speed)."""
+        s_ahead, s_astern, o = (float(v) for v in self.theta)
+        x = n - o
+        return x / (s_ahead if x >= 0.0 else s_astern)
+
+    def spread(self, x: float) -> float:
+        """The map's standard deviation at ``x`` (rev/s)."""
+        phi = self._phi(x)
+        return math.sqrt(max(float(phi @ self.P @ phi), 0.0))
+
+    def learn(self, gap_s: float, x: float, error: float, sigma: float) -> None:
+        """One healthy, commanded sample: data-sheet speed ``x``, the measured speed's
+        ``error`` outside the prediction's range, the band ``sigma`` of the measurement."""
+        cfg = self.cfg
+        if cfg.cal_tau_s <= 0.0 or x == 0.0 or not self.learns:
+            return
+        self.P[2, 2] += self._prior[2] * (gap_s / cfg.cal_tau_s)  # the in-flow moves
+        phi = self._phi(x)
+        var = float(phi @ self.P @ phi) + sigma * sigma
+        gain = self.P @ phi / var
+        bound = cfg.clear_z * math.sqrt(var)
+        innovation = min(max(error, -bound), bound)
+        self.theta = self.theta + gain * innovation
+        self.P = self.P - np.outer(gain, phi @ self.P)
+        lo, hi, off = 1.0 - cfg.cal_limit, 1.0 + cfg.cal_limit, 0.1 * self.n_full
+        a, b, o = self.theta.tolist()
+        self.theta = np.array([min(max(a, lo), hi), min(max(b, lo), hi), min(max(o, -off), off)])
+
+
 class Channel:
     """One actuator's prediction, tests and decision state."""
 
@@ -110,14 +177,21 @@ class Channel:
         self.r_t = self.r_q = math.nan
         self.ratio_t = 1.0  # EWMA of (n_m / n_p)^2 (weak)
         self.ratio_q = 1.0  # EWMA of the torque ratio (load)
-        self.t_m = self.t_p = self.held_t = 0.0  # last thrusts: implied, predicted, held (N)
-        self.sig_t = self.sig_i = 1.0  # last bands
+        self.t_m = self.t_p = 0.0  # last thrusts: implied by the speed, predicted (N)
+        self.n_p = self.held_n = 0.0  # last predicted speed, a stuck episode's held speed
+        self.x_p = 0.0  # last data-sheet speed (the speed map's input)
+        self.band_n = 1.0  # last band of the telemetry alone
+        self.range_n = 0.0  # last width of the prediction's range (the lag's uncertainty)
+        self.sig_n = self.sig_i = 1.0  # last bands (speed, current)
         self.i_m = self.i_pred = 0.0  # last current: measured, predicted (A)
-        self.cal_count = 0  # healthy, commanded, steady samples calibrated on
         self.seen = 0  # commanded samples (the first cal_samples commission the model)
-        self.steady = False  # the last sample's prediction was not moving
-        self.speed_scale = 1.0  # calibrated on healthy data: true / data-sheet speed
-        self.load_model = LoadModel(model, cfg, abs(self.reference(model.full_force_n)))
+        n_full = abs(self.reference(model.full_force_n))
+        self.speed_map = SpeedMap(cfg, n_full, model.is_shaft)  # true against data sheet
+        if model.is_shaft:  # the band: bands_rel |n| + bands_res x the telemetry's resolution
+            self.bands = (cfg.band_rel, cfg.band_res * cfg.speed_resolution)
+        else:
+            self.bands = (cfg.servo_band_rel, cfg.servo_band_res * cfg.speed_resolution)
+        self.load_model = LoadModel(model, cfg, n_full)
         # a load current lost in the sensor's noise says nothing (a small tunnel thruster)
         self.load_visible = (
             model.is_shaft
@@ -157,6 +231,19 @@ class Channel:
         while len(self.history) > 2 and self.history[1][0] < keep:
             self.history.popleft()
 
+    def restart(self, t_s: float, speed: float) -> None:
+        """The prediction restarted from the measured ``speed`` at ``t_s`` (after a telemetry
+        gap: the drive may have stopped, been restarted or rebooted meanwhile); the tests and
+        the stuck window start again."""
+        n = self.speed_map.data_sheet(speed)
+        self.n_pred = [n, n, n]
+        self.t_pred = t_s
+        self.history.clear()
+        self.history.append((t_s, n, n, n))
+        self.recent.clear()
+        self.thrust.reset()
+        self.load.reset()
+
     def predicted_at(self, t_s: float) -> tuple[float, float, float]:
         """The three predicted speeds (nominal, fast, slow lag) at ``t_s`` from the
         history, linear between entries."""
@@ -178,17 +265,3 @@ class Channel:
     def current_at(self, n: float) -> float:
         """The current (A) a healthy shaft at speed ``n`` draws (:class:`LoadModel`)."""
         return self.load_model.current(n)
-
-    def calibrate(self, gap_s: float, n_m: float, n_p: float) -> None:
-        """Healthy, commanded and steady: move the speed scale towards this sample."""
-        cfg = self.cfg
-        if cfg.cal_tau_s <= 0.0 or n_p == 0.0 or n_m * n_p <= 0.0:
-            return
-        self.cal_count += 1  # a running mean at first, then the time constant
-        w = min(max(gap_s / cfg.cal_tau_s, 1.0 / self.cal_count), 1.0)
-        lo, hi = 1.0 - cfg.cal_limit, 1.0 + cfg.cal_limit
-        raw_n = n_m / n_p  # n_p: the data sheet's prediction, uncalibrated
-        if not lo <= raw_n <= hi:  # beyond what a data sheet gets wrong: a fault, not this
-            self.cal_count -= 1
-            return
-        self.speed_scale = min(max(self.speed_scale + w * (raw_n - self.speed_scale), lo), hi)

@@ -95,17 +95,26 @@ class DiagnosisConfig:
     # dither's only gain, shaft-invisible losses (hull, interaction), costs the boat its
     # motion on every healthy hour (CyberShip II: 3-5 mm in 120 s where CAP moves 0).
     dither: bool = False
-    floor_rel: float = 0.1
-    probe_rel: float = 0.03  # a thruster that is not turning is judged again from this
-    band_rel: float = 0.03
-    band_abs: float = 0.005
+    # The telemetry's speed resolution (rev/s; a servo: its fraction of full deflection), from
+    # the drive's data sheet: DroneCAN esc.Status reports whole rpm (1/60 rev/s)
+    speed_resolution: float = 1.0 / 60.0
+    # A sample is judged when the whole predicted range turns one way by at least this many
+    # bands (at the speed it runs: a DP thruster at 1 % of its rating is judged)
+    floor_z: float = 4.0
+    band_rel: float = 0.03  # the speed band: band_rel |n_p| + band_res speed_resolution
+    band_res: float = 1.0
+    servo_band_rel: float = 0.03  # a servo's deflection band, the same way
+    servo_band_res: float = 1.0
     timing_s: float = 0.02  # the prediction's time is known to this (sampling)
     lag_uncertainty: float = 0.5  # the drive's time constant is known within x / (1 + this)
     current_rel: float = 0.03
     current_abs: float = 0.02
     load_snr: float = 5.0  # the load is judged only where full speed draws this many bands
     cusum_k: float = 1.0
-    cusum_h: float = 12.0
+    cusum_h: float = 12.0  # the speed test's threshold
+    # the load test's: the load current drifts with the sea (inflow, ventilation) where the
+    # speed does not, so it is calibrated on its own healthy peaks
+    load_h: float = 12.0
     stall_rel: float = 0.1  # |n_m| below this share of the predicted speed: not turning
     jam_current_rel: float = 0.5  # drawn current (above idle) of the predicted: jammed
     stuck_window_s: float = 2.0

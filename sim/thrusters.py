@@ -25,6 +25,7 @@ is the fault's ``delta`` whatever the cause and the drive kind (:func:`signature
     fouled          K_T x delta, K_Q x (1 + g (1-d))    K_T x delta K_Q             lift x delta
     drive-dead      not driven: n -> 0 with T, idle current, reports 0 rpm
     power-lost      not driven, reports nothing
+    held            not driven by the command, reports nothing; its force is the bias
     jammed          n = 0 at once, current at the drive's limit under command
     stuck           the state (speed, deflection) frozen at the onset
     telemetry-lost  healthy, reports nothing
@@ -188,8 +189,9 @@ def signature(
     lift = np.where(lost | fouled, d, 1.0)
     k_t = np.where(torque_drive & lost, d * d, np.where(torque_drive & fouled, d * k_q, lift))
     drive = np.where(weak, np.where(torque_drive | ~is_shaft, d, np.sqrt(d)), 1.0)
-    off = (kind == "drive-dead") | (kind == "power-lost") | (kind == "jammed")
-    silent = (kind == "power-lost") | (kind == "telemetry-lost")
+    held = kind == "held"  # its force is the fault's bias, outside the bank
+    off = (kind == "drive-dead") | (kind == "power-lost") | (kind == "jammed") | held
+    silent = (kind == "power-lost") | (kind == "telemetry-lost") | held
     return Signature(
         drive, k_t, k_q, np.where(kind == "hull-loss", d, 1.0), ~off, kind == "jammed",
         kind == "stuck", ~silent, kind == "ventilation",

@@ -43,6 +43,9 @@ class Cause(enum.Enum):
     FOULED = "fouled"  # rope or fouling: less thrust for more torque
     DRIVE_DEAD = "drive-dead"  # not driven: the shaft stops, the ESC reports 0 rpm, idle
     POWER_LOST = "power-lost"  # not driven and the ESC silent
+    # the drive ignores its commands and holds a force (the fault's bias), reporting nothing:
+    # a command link lost with hold-last, a drive switched to local control
+    HELD = "held"
     JAMMED = "jammed"  # the shaft is blocked: 0 rpm, the drive at its current limit
     STUCK = "stuck"  # the output frozen at its onset value (see ``Truth.stuck``)
     TELEMETRY_LOST = "telemetry-lost"  # works as commanded, reports nothing
@@ -54,13 +57,14 @@ class Cause(enum.Enum):
 SHAFT_INVISIBLE = frozenset({Cause.HULL_LOSS})
 
 
-def default_cause(delta: float, stuck: bool) -> Cause:
-    """The cause of a fault that names none: STUCK if stuck, else POWER_LOST at delta 0,
-    WEAK_MOTOR below 1, HEALTHY at 1 (a bias alone leaves the shaft healthy)."""
+def default_cause(delta: float, stuck: bool, bias: float = 0.0) -> Cause:
+    """The cause of a fault that names none: STUCK if stuck, else at delta 0 HELD with a
+    bias (a force that ignores the command: the paper's "stuck at a value") and POWER_LOST
+    without, WEAK_MOTOR below 1, HEALTHY at 1 (a bias alone leaves the shaft healthy)."""
     if stuck:
         return Cause.STUCK
     if delta <= 0.0:
-        return Cause.POWER_LOST
+        return Cause.HELD if bias != 0.0 else Cause.POWER_LOST
     return Cause.WEAK_MOTOR if delta < 1.0 else Cause.HEALTHY
 
 
@@ -88,7 +92,10 @@ class Truth:
         stuck = self.stuck.tolist()
         if self.cause:
             return tuple(Cause.STUCK if s else c for c, s in zip(self.cause, stuck, strict=True))
-        return tuple(default_cause(d, s) for d, s in zip(self.delta.tolist(), stuck, strict=True))
+        return tuple(
+            default_cause(d, s, f)
+            for d, s, f in zip(self.delta.tolist(), stuck, self.f.tolist(), strict=True)
+        )
 
     def effective(self, held: FloatArray) -> Truth:
         """(delta, f) seen from the command: a stuck thruster is ``delta = 0``, ``f = held``
@@ -216,8 +223,8 @@ class FaultSchedule:
         if all(c is None for c in named):
             return Truth(delta, f, stuck)
         cause = tuple(
-            default_cause(d, s) if c is None else c
-            for c, d, s in zip(named, delta.tolist(), stuck.tolist(), strict=True)
+            default_cause(d, s, b) if c is None else c
+            for c, d, s, b in zip(named, delta.tolist(), stuck.tolist(), f.tolist(), strict=True)
         )
         return Truth(delta, f, stuck, cause)
 

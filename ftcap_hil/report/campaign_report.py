@@ -224,8 +224,10 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "## Headline",
         "",
         "Per estimating mode and scenario: the false-alarm episodes per healthy hour, every "
-        "detectable fault's isolation and the runs with harm, each with its 95 % interval "
-        "and sample size; the median deviation over the oracle's.",
+        "detectable fault's isolation (one fault per thruster and run: an intermittent "
+        "fault counts once, from its first onset to its first isolation) and the runs with "
+        "harm, each with its 95 % interval and sample size; the median deviation over the "
+        "oracle's.",
         "",
         HEADLINE_BEGIN,
         *markdown_table(headline_rows(rows, fault_rows(rows)), HEADLINE_COLUMNS),
@@ -235,15 +237,19 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "",
         *markdown_table(run_groups(rows), RUN_COLUMNS),
         "",
-        "## Faults per mode and fault kind",
+        "## Fault episodes per mode and fault kind",
+        "",
+        "Every episode on its own: each on/off spell of an intermittent fault is a row "
+        "here (the headline and the map below count the fault once per run).",
         "",
         *markdown_table(fault_groups(fault_rows(rows)), FAULT_COLUMNS),
         "",
         *_harm_section(harm, params),
         "## Where the method stops",
         "",
-        "Per mode, scenario and fault kind: the detectable faults isolated within 5 s, "
-        "within 30 s and never (Wilson 95 %, n faults); per scenario the healthy hours and "
+        "Per mode, scenario and fault kind: the detectable faults (one per thruster and "
+        "run) isolated within 5 s, within 30 s and never (Wilson 95 %, n faults); per "
+        "scenario the healthy hours and "
         "false-alarm episodes per hour (Poisson 95 %, n episodes).",
         "",
         *markdown_table(sweep_rows(rows, fault_rows(rows)), SWEEP_COLUMNS),

@@ -1,5 +1,6 @@
 """Where the method stops: per mode, scenario (a preset in one condition of a sweep) and
-fault kind, the share of detectable faults isolated within 5 s, within 30 s and never, with
+fault kind, the share of detectable faults (one per thruster and run: the spells of an
+intermittent fault count once) isolated within 5 s, within 30 s and never, with
 their Wilson 95 % intervals; and per mode and scenario the healthy hours and the
 false-alarm episodes per hour with their Poisson interval.
 
@@ -27,13 +28,38 @@ def _delay(f: Row) -> float:
     return math.inf if d is None else float(d)
 
 
+def faults_per_run(faults: list[Row]) -> list[Row]:
+    """The faults a user counts: one per thruster and run. The spells of an intermittent
+    fault (one row each) become one fault from the first spell's onset, isolated when any
+    spell first was (its delay counted from that first onset), detectable if any spell
+    was; ``spells`` says how many it had. Rows without a run ``key`` stand alone."""
+    groups: dict[Any, list[Row]] = defaultdict(list)
+    for n, f in enumerate(faults):
+        key = f.get("key")
+        groups[n if key is None else (key, f.get("thruster"))].append(f)
+    out = []
+    for g in groups.values():
+        if len(g) == 1:
+            out.append({**g[0], "spells": 1})
+            continue
+        first = min(g, key=lambda f: float(f["onset_s"]))
+        t0 = float(first["onset_s"])
+        isolated = min(float(f["onset_s"]) + _delay(f) for f in g)
+        out.append({
+            **first, "spells": len(g), "detectable": any(f["detectable"] for f in g),
+            "isolation_delay_s": None if math.isinf(isolated) else isolated - t0,
+        })  # fmt: skip
+    return out
+
+
 def sweep_rows(rows: list[Row], faults: list[Row]) -> list[Row]:
-    """One row per (mode, scenario, fault kind) with detectable faults, and per (mode,
-    scenario) one ``healthy`` row: see the module docstring. Shares are fractions; each
-    value ``x`` has ``x_lo``, ``x_hi`` and ``x_n`` beside it."""
+    """One row per (mode, scenario, fault kind) with detectable faults (per run:
+    :func:`faults_per_run`), and per (mode, scenario) one ``healthy`` row: see the module
+    docstring. Shares are fractions; each value ``x`` has ``x_lo``, ``x_hi`` and ``x_n``
+    beside it."""
     order = list(dict.fromkeys(r["scenario"] for r in rows))
     groups: dict[tuple[str, str, str], list[Row]] = defaultdict(list)
-    for f in faults:
+    for f in faults_per_run(faults):
         if f["mode"] != "none" and f["detectable"]:
             groups[(f["variant"], f["scenario"], f["kind"])].append(f)
     out: list[Row] = []
@@ -57,11 +83,13 @@ def _shares(row: Row, delays: list[float]) -> None:
 def headline_rows(rows: list[Row], faults: list[Row]) -> list[Row]:
     """Per estimating mode and scenario, one line a reader takes away: the healthy hours
     and false-alarm episodes per hour, every detectable fault's isolation (within 5 s,
-    30 s, never), the runs with harm and the median deviation over the oracle's; each
-    rate and share with its 95 % interval and sample size. ``rows`` with ``derive``'s
-    columns (harm, dev_ratio_oracle)."""
+    30 s, never; per run, an intermittent fault once: :func:`faults_per_run`), the runs
+    with harm and the median deviation over the oracle's; each rate and share with its
+    95 % interval and sample size. ``rows`` with ``derive``'s columns (harm,
+    dev_ratio_oracle)."""
     order = list(dict.fromkeys(r["scenario"] for r in rows))
     healthy = {(h["mode"], h["scenario"]): h for h in _healthy_rows(rows, order)}
+    faults = faults_per_run(faults)
     out = []
     for (variant, scenario), h in healthy.items():
         row: Row = {k: v for k, v in h.items() if k != "kind"}

@@ -88,3 +88,27 @@ def test_the_headline_pools_a_conditions_faults_harm_and_healthy_hours() -> None
     assert row["dev_ratio_oracle_median"] == pytest.approx(1.05)  # of 0.9, 1.0, 1.1, 1.3
     text = "x\n<!-- headline begin -->\n| a |\n<!-- headline end -->\ny"
     assert headline_block(text) == "<!-- headline begin -->\n| a |\n<!-- headline end -->"
+
+
+def test_an_intermittent_fault_counts_once_per_run_from_its_first_onset() -> None:
+    """Three spells of one thruster in one run (isolated only in the second, 2 s after its
+    onset at 100 s) are one fault isolated 72 s after the first onset at 30 s; another
+    thruster's fault in the same run, and the same thruster in another run, stay their
+    own; a run whose spells were never isolated is one fault never isolated."""
+    from ftcap_hil.report.campaign_sweep import faults_per_run, headline_rows
+
+    def spell(key: str, thruster: int, onset: float, delay: float | None) -> dict:
+        return {**_fault("bf3", delay, kind="intermittent"), "key": key,
+                "thruster": thruster, "onset_s": onset}  # fmt: skip
+
+    faults = [spell("a", 1, 30.0, None), spell("a", 1, 100.0, 2.0), spell("a", 1, 170.0, 0.0),
+              spell("a", 2, 50.0, 1.0), spell("b", 1, 30.0, 4.0),
+              spell("c", 1, 30.0, None), spell("c", 1, 90.0, None)]  # fmt: skip
+    merged = {(f["key"], f["thruster"]): f for f in faults_per_run(faults)}
+    assert len(merged) == 4
+    assert merged[("a", 1)]["spells"] == 3 and merged[("a", 1)]["isolation_delay_s"] == 72.0
+    assert merged[("a", 1)]["onset_s"] == 30.0
+    assert merged[("a", 2)]["isolation_delay_s"] == 1.0 and merged[("a", 2)]["spells"] == 1
+    assert merged[("c", 1)]["isolation_delay_s"] is None
+    (row,) = headline_rows([_run("bf3", 1.0, 0)], faults)
+    assert row["faults"] == 4 and row["isolated_5s"] == 0.5 and row["never"] == 0.25

@@ -302,6 +302,18 @@ def test_default_causes_from_truth() -> None:
     assert out.rpm[1] == pytest.approx(math.sqrt(0.5) * out.rpm[0], rel=1e-12)
 
 
+def test_a_force_held_without_a_command_is_its_own_silent_cause() -> None:
+    """delta 0 with a bias (the campaigns' "stuck" kind, the paper's stuck-at-a-value): the
+    drive holds a force and reports nothing; it is not a power loss (no force left) and
+    not a frozen shaft (whose drive reports its speed)."""
+    truth = Truth(np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.05, 0.0]))
+    assert truth.causes() == (Cause.HEALTHY, Cause.HELD, Cause.POWER_LOST)
+    bank = ThrusterBank(ThrusterBankConfig.ideal(3))
+    out = bank.step(np.full(3, 0.1), truth, 0.02)
+    assert out.reports.tolist() == [True, False, False]
+    assert out.produced[1] == pytest.approx(0.05) and out.produced[2] == 0.0
+
+
 def test_reverse_asks_the_speed_of_the_command() -> None:
     # a fixed-pitch propeller in reverse: K_T * 0.65 at the speed of the healthy reverse thrust
     fwd = signed(Cause.HEALTHY, 1.0, 0.1)

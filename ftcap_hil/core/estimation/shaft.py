@@ -14,9 +14,11 @@ quantity the drive measures: its speed, at the speed it runs::
                                                       negative either way round
     r_Q = (I_m - I(n_m)) / sigma_I                    the current against what the load at
                                                       the measured speed draws (A)
-    sigma_n = band_rel |n_p| + band_res speed_resolution, and n_m - n_p taken from the
-              nearest of the predictions with the lag T_n (1 + lag_uncertainty)^(+-1) and
-              within +-timing_s (the drive's lag and the sample's time are known no better)
+    sigma_n = band_rel |n_p| + band_res speed_resolution + spread(n_p) (servos: their own
+              servo_band_*), n_p through the learnt speed map (SpeedMap: its spread is
+              what it does not know yet), and n_m - n_p taken from the nearest of the
+              predictions with the lag T_n (1 + lag_uncertainty)^(+-1) and within
+              +-timing_s (the drive's lag and the sample's time are known no better)
     sigma_I = current_rel (I(n_m) - I_idle) + current_abs
 
 The band is what the telemetry resolves at the operating point (the data sheet's share of
@@ -153,7 +155,6 @@ class ShaftDiagnoser:
         # in the direction of the predicted speed: a deficit is negative either way round
         ch.r_t = math.copysign(1.0, n_p) * (speed - min(max(speed, lo), hi)) / sigma_n
         ch.n_p, ch.x_p, ch.sig_n, ch.band_n, ch.range_n = n_p, speeds[0], sigma_n, band, hi - lo
-        ch.t_m, ch.t_p = ch.open_water(speed), ch.open_water(n_p)
         ch.r_q = math.nan
         mdl = ch.model
         if ch.load_visible and math.isfinite(current_a):
@@ -163,7 +164,7 @@ class ShaftDiagnoser:
             ch.i_m, ch.i_pred, ch.sig_i = current_a, i_pred, sigma_i
         ch.speed_m = speed
         ch.last_sample_s = t_measured_s
-        ch.thrust_sum += ch.t_m
+        ch.thrust_sum += ch.open_water(speed)  # the thrust the speed implies (N)
         ch.thrust_count += 1
         # turning measurably: the whole predicted range one way, floor_z bands from zero
         least = min(abs(lo), abs(hi)) if lo * hi > 0.0 else 0.0

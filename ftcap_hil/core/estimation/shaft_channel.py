@@ -101,10 +101,10 @@ class SpeedMap:
     in-flow does. Each sample teaches only what the drive's lag cannot explain (the error
     outside the prediction's range): a reversal in progress says nothing about the scales.
     Innovations are clipped to ``clear_z`` of their spread, so a fault is learnt no faster
-    than the coefficients may walk. ``spread(x)`` is the map's own
-    remaining uncertainty there: large in a direction or at a speed it has not yet been
-    calibrated on. A servo's position loop knows no in-flow and its travel no data-sheet
-    scale: its map does not learn (the identity, no spread)."""
+    than the coefficients may walk. ``spread(x)`` is the map's own remaining uncertainty
+    there: large in a direction or at a speed it has not yet been calibrated on. A servo's
+    position loop knows no in-flow and its travel no data-sheet scale: its map does not
+    learn (the identity, no spread)."""
 
     def __init__(self, cfg: DiagnosisConfig, n_full: float, learns: bool = True) -> None:
         self.cfg = cfg
@@ -177,7 +177,6 @@ class Channel:
         self.r_t = self.r_q = math.nan
         self.ratio_t = 1.0  # EWMA of (n_m / n_p)^2 (weak)
         self.ratio_q = 1.0  # EWMA of the torque ratio (load)
-        self.t_m = self.t_p = 0.0  # last thrusts: implied by the speed, predicted (N)
         self.n_p = self.held_n = 0.0  # last predicted speed, a stuck episode's held speed
         self.x_p = 0.0  # last data-sheet speed (the speed map's input)
         self.band_n = 1.0  # last band of the telemetry alone

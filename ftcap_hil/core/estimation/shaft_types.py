@@ -40,7 +40,6 @@ ACTIONABLE = frozenset(
 )  # fmt: skip
 
 
-NOT_TURNING = frozenset({Hypothesis.DRIVE_DEAD, Hypothesis.JAMMED})
 LOAD = frozenset({Hypothesis.LOAD_LOSS, Hypothesis.LOAD_GAIN})
 
 

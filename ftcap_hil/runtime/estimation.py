@@ -1,13 +1,19 @@
 """The estimator's samples: the plant's state at both ends of an interval and the mean command
 over the same interval.
 
-Once per ``estimation_period_s`` of telemetry (the newest sample over the telemetry ports,
-:func:`newest_odometry`), :class:`EstimationSampler` pairs two odometry
-samples ``x0 = [eta, nu]`` and ``x1`` (NED pose, body velocities) ``dt`` apart, as a core
-:class:`~ftcap_hil.core.estimation.Observation`, with the time-weighted mean of the commands
-the thrusters had over that interval (from a :class:`CommandHistory` of what was sent, with
-its stamps). The command interval is found on this process's clock: the receipt stamps,
-corrected by :class:`VesselClock` for the telemetry's variable delay.
+The intervals lie on **the vessel's grid**: their ends are the first telemetry samples at or
+after each multiple of ``estimation_period_s`` of vessel time (``Odometry.time_s``), as the
+offline loop samples at ``k T_s``. :class:`EstimationSampler` is handed every sample the
+chosen port received (:meth:`EstimationSampler.observe`), not only the newest at a cycle,
+so which states pair up does not depend on the phase of the allocator's deadlines against
+the vessel's steps, nor on a late cycle; each cycle takes the interval closed since the
+last (:meth:`EstimationSampler.take`). A telemetry stream without vessel time falls back to
+receipt stamps: an interval of at least 0.9 periods ending at the newest sample.
+
+Each interval is paired, as a core :class:`~ftcap_hil.core.estimation.Observation`, with
+the time-weighted mean of the commands the thrusters had over it (from a
+:class:`CommandHistory` of what was sent, with its stamps), found on this process's clock:
+the receipt stamps, corrected by :class:`VesselClock` for the telemetry's variable delay.
 """
 
 from __future__ import annotations
@@ -199,8 +205,24 @@ class _Point(NamedTuple):
     at_ns: int  # the stamp that times the command average
 
 
+# A sample up to this much vessel time older than the last one seen is a late copy from
+# another port (two ports carry the same samples, one may lag a sample or two); further
+# back, the vessel restarted.
+RESTART_BACK_S = 1.0
+# The grid's ends are at least this share of a period apart: a sample that reaches the next
+# multiple right after a gap (a dropped or late sample) closes no interval of its own.
+MIN_INTERVAL = 0.5
+# Intervals closed and not taken yet: each cycle takes the oldest, so two closing between two
+# cycles (the telemetry's own spacing) are both judged, one a cycle late; beyond this many
+# (cycles slower than the grid) the oldest two are merged, so the estimate never lags more.
+MAX_PENDING = 2
+# A sample this close before a multiple of the period is at it: vessel times travel as whole
+# microseconds (MAVLink's time_usec, truncated) or float32, so k T_s may arrive as k T_s - 1 us.
+GRID_SLACK_S = 1e-3
+
+
 class EstimationSampler:
-    """Pairs telemetry with the commands sent (module docstring).
+    """Pairs telemetry with the commands sent on the vessel's grid (module docstring).
 
     ``use_vessel_clock``: time the command average by :class:`VesselClock` (else by the
     receipt stamps); ``time_scale``: the vessel's seconds per second of this clock.
@@ -218,55 +240,83 @@ class EstimationSampler:
         self.use_vessel_clock = use_vessel_clock
         self.history = CommandHistory(horizon_s=10 * period_s + 5.0)
         self._clock = VesselClock(rate=time_scale)
-        self._clock_fed = (-1, -1)  # (receipt stamp, mapped stamp) of the last odometry
-        self._last: _Point | None = None
+        self._seen: tuple[int, float] | None = None  # (receipt, vessel time) last judged
+        self._last: _Point | None = None  # the grid's latest end
+        self._cell = 0  # its multiple of the period
+        self._closed: deque[tuple[_Point, _Point]] = deque()  # intervals not taken yet
 
     def restart(self) -> None:
         """Start a new interval at the next sample: what lies before may not be trusted."""
         self._last = None
+        self._closed.clear()
 
     def command_sent(self, stamp_ns: int, u: FloatArray) -> None:
         """Command ``u`` (m,) in N went to the thrusters at ``stamp_ns``."""
         self.history.add(stamp_ns, u)
 
     def sample(self, odom: Odometry | None, receipt_ns: int) -> EstimationSample | None:
-        """A sample when the latest telemetry (``odom`` received at ``receipt_ns``) closes an
-        interval of at least 0.9 estimation periods since the last one; None in between."""
-        if odom is None:
+        """:meth:`observe` the latest telemetry (``odom`` received at ``receipt_ns``), then
+        :meth:`take` (a caller that sees only the newest sample per cycle)."""
+        if odom is not None:
+            self.observe(odom, receipt_ns)
+        return self.take()
+
+    def _new(self, odom: Odometry, receipt_ns: int) -> bool:
+        """Whether ``odom`` was not judged yet: a later vessel time (or, without one, a
+        later receipt); a vessel time far back (``RESTART_BACK_S``) is a restart."""
+        seen = self._seen
+        if seen is None:
+            return True
+        t, (seen_rx, seen_t) = odom.time_s, seen
+        if not (math.isfinite(t) and math.isfinite(seen_t)):
+            return receipt_ns > seen_rx
+        return t > seen_t or t < seen_t - RESTART_BACK_S
+
+    def observe(self, odom: Odometry, receipt_ns: int) -> None:
+        """One telemetry sample, received at ``receipt_ns``: judged once (the plausibility
+        gate), timed, and placed on the grid; a copy or a sample seen already changes nothing
+        (``gate.reason`` keeps the last verdict)."""
+        if not self._new(odom, receipt_ns):
+            return
+        self._seen = (receipt_ns, odom.time_s)
+        if not self.gate.check(odom, receipt_ns):
+            return  # dropped before the estimator: the interval goes on to the next good one
+        at = self._clock.map(odom.time_s, receipt_ns) if self.use_vessel_clock else receipt_ns
+        point, prev = _Point(receipt_ns, odom, at), self._last
+        t = odom.time_s
+        if not math.isfinite(t):
+            if prev is None or (receipt_ns - prev.receipt_ns) * 1e-9 >= 0.9 * self.period_s:
+                self._close(prev, point, 0)
+            return
+        cell = math.floor((t + GRID_SLACK_S) / self.period_s)
+        if prev is None or not math.isfinite(prev.odom.time_s) or t <= prev.odom.time_s:
+            self._last, self._cell = point, cell  # a new start
+            self._closed.clear()
+        elif cell > self._cell and t - prev.odom.time_s >= MIN_INTERVAL * self.period_s:
+            self._close(prev, point, cell)
+
+    def _close(self, prev: _Point | None, point: _Point, cell: int) -> None:
+        """``point`` ends the grid's interval from ``prev``, queued for :meth:`take`; past
+        ``MAX_PENDING`` the two oldest become one (no stretch of the motion goes unjudged)."""
+        if prev is not None:
+            self._closed.append((prev, point))
+            if len(self._closed) > MAX_PENDING:
+                first, second = self._closed.popleft(), self._closed.popleft()
+                self._closed.appendleft((first[0], second[1]))
+        self._last, self._cell = point, cell
+
+    def take(self) -> EstimationSample | None:
+        """The oldest interval closed and not taken yet, with its mean command (None: none,
+        or no command known over all of it)."""
+        if not self._closed:
             return None
-        if receipt_ns != self._clock_fed[0]:  # a new sample: judged once, then timed
-            if not self.gate.check(odom, receipt_ns):
-                # dropped before the estimator: the interval goes on to the next good sample
-                self._clock_fed = (receipt_ns, receipt_ns)
-                return None
-            mapped = (
-                self._clock.map(odom.time_s, receipt_ns) if self.use_vessel_clock else receipt_ns
-            )
-            self._clock_fed = (receipt_ns, mapped)
-        elif self.gate.reason is not None:
-            return None  # the same implausible sample, seen again by a later cycle
-        point = _Point(receipt_ns, odom, self._clock_fed[1])
-        prev = self._last
-        if prev is None:
-            self._last = point
-            return None
-        if receipt_ns == prev.receipt_ns:
-            return None
-        # The interval is measured on the vessel's clock when telemetry carries it: receipt
-        # stamps jitter, and a threshold on them skips samples whenever the telemetry period
-        # equals the estimation period.
-        dt = odom.time_s - prev.odom.time_s
-        if math.isfinite(dt) and dt <= 0:  # vessel time went back (a restart): a new interval
-            self._last = point
-            return None
-        if not math.isfinite(dt):  # no vessel time: the receipt stamps
-            dt = (receipt_ns - prev.receipt_ns) * 1e-9
-        if dt < 0.9 * self.period_s:
-            return None
-        self._last = point
+        prev, point = self._closed.popleft()
         u_mean = self.history.mean(prev.at_ns, point.at_ns)
         if u_mean is None:
             return None
+        dt = point.odom.time_s - prev.odom.time_s
+        if not math.isfinite(dt):
+            dt = (point.receipt_ns - prev.receipt_ns) * 1e-9
         x0 = np.concatenate([prev.odom.eta, prev.odom.nu])
-        x1 = np.concatenate([odom.eta, odom.nu])
+        x1 = np.concatenate([point.odom.eta, point.odom.nu])
         return EstimationSample(Observation(x0, x1, dt), u_mean)

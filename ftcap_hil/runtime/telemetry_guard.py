@@ -48,12 +48,15 @@ CLOCK_SLACK_S = 0.5
 
 class OdometryMailbox(Mailbox[Odometry]):
     """A telemetry mailbox that also notes when vessel time goes back (or a stamped stream
-    stops carrying vessel time): the sign of a second sender on the port."""
+    stops carrying vessel time): the sign of a second sender on the port; and keeps its last
+    ``keep`` samples, so that the estimation sampler sees every one (:meth:`received_after`),
+    not only the newest a cycle happens to read."""
 
     def __init__(self, name: str, keep: int = 64) -> None:
         super().__init__(name)
         self._last_time_s = math.nan
         self._reversals: deque[int] = deque(maxlen=keep)
+        self._recent: deque[Stamped[Odometry]] = deque(maxlen=keep)
         self._rev_lock = threading.Lock()
 
     def put(self, value: Odometry, stamp_ns: int | None = None) -> None:
@@ -62,10 +65,17 @@ class OdometryMailbox(Mailbox[Odometry]):
         t = value.time_s
         last, self._last_time_s = self._last_time_s, t
         super().put(value, stamp_ns)
-        if math.isfinite(last) and not (math.isfinite(t) and t >= last):
-            slot = self.latest()
-            with self._rev_lock:
+        slot = self.latest()
+        with self._rev_lock:
+            if slot is not None:
+                self._recent.append(slot)
+            if math.isfinite(last) and not (math.isfinite(t) and t >= last):
                 self._reversals.append(slot.stamp_ns if slot is not None else 0)
+
+    def received_after(self, after_ns: int, upto_ns: int) -> list[Stamped[Odometry]]:
+        """The samples kept that were received in (``after_ns``, ``upto_ns``], oldest first."""
+        with self._rev_lock:
+            return [s for s in self._recent if after_ns < s.stamp_ns <= upto_ns]
 
     def reversals_since(self, since_ns: int) -> int:
         """Reversals noted at or after ``since_ns`` (monotonic ns)."""
@@ -187,11 +197,23 @@ class TelemetryIntake:
     ) -> None:
         self.guard, self.sampler, self.transitions = guard, sampler, transitions
         self.fresh_ns = int(fresh_s * 1e9)
+        self._fed_ns = -1  # samples received up to here were offered to the sampler (or not)
 
     def newest_stamp(self) -> int:
         """The latest receipt stamp over every telemetry port (-1: nothing yet)."""
         slots = [p.mailbox.latest() for p in self.guard.ports]
         return max((s.stamp_ns for s in slots if s is not None), default=-1)
+
+    def _since(self, fed_ns: int, chosen: Stamped[Odometry]) -> list[Stamped[Odometry]]:
+        """Every sample of the chosen sample's port received since the last cycle, up to and
+        including it (a port that keeps none: the chosen sample alone)."""
+        for p in self.guard.ports:
+            box = p.mailbox
+            if isinstance(box, OdometryMailbox):
+                got = box.received_after(fed_ns, chosen.stamp_ns)
+                if any(s is chosen for s in got):
+                    return got
+        return [chosen]
 
     def sample(self, now_ns: int, stale: bool) -> EstimationSample | None:
         """This cycle's estimation sample (None: none due, stale, frozen or dropped)."""
@@ -212,9 +234,12 @@ class TelemetryIntake:
             "telemetry from the vessel's authenticated source again",
             Severity.WARNING,
         )
+        fed, self._fed_ns = self._fed_ns, now_ns  # what came while frozen is never used
         if stale or choice.sample is None:
             return None
-        got = self.sampler.sample(choice.sample.value, choice.sample.stamp_ns)
+        for s in self._since(fed, choice.sample):
+            self.sampler.observe(s.value, s.stamp_ns)
+        got = self.sampler.take()
         gate = self.sampler.gate
         log.update(
             "telemetry_implausible",

@@ -30,7 +30,7 @@ from ftcap_hil.ports.transitions import TransitionLog
 from ftcap_hil.ports.tunables import LiveTunables
 from ftcap_hil.runtime.calls import PendingCalls
 from ftcap_hil.runtime.daemon import AllocatorDaemon, Ports
-from ftcap_hil.runtime.estimation import EstimationSampler, newest_odometry
+from ftcap_hil.runtime.estimation import GRID_SLACK_S, EstimationSampler, newest_odometry
 from ftcap_hil.runtime.latency import LatencyStats
 from ftcap_hil.runtime.param_sync import ParamSync
 from ftcap_hil.runtime.signals import ForcedExit
@@ -93,6 +93,40 @@ def test_the_sampler_pairs_states_a_period_apart_with_the_commands_between() -> 
     got = s.sample(_odom(0.6, 0.02), 610 * MS)
     assert got is not None
     np.testing.assert_allclose(got.u_mean, 0.0 * u, atol=1e-12)
+
+
+def _grid_intervals(phase_s: float, late_every: int = 0) -> list[tuple[float, float]]:
+    """The intervals (vessel times of both ends) a sampler takes from telemetry every 50 ms
+    (the vessel's steps of 20 ms, decimated 2-3) with cycles every 0.2827 s from ``phase_s``;
+    every ``late_every``-th cycle is skipped (a loaded machine)."""
+    s = EstimationSampler(period_s=0.2827, use_vessel_clock=True)
+    s.command_sent(0, np.ones(4))
+    times = [round(0.02 * k, 10) for k in range(0, 1000) if (k * 2) % 5 < 2]
+    got, cycle, n = [], phase_s, 0
+    for t in times:
+        while cycle < t:
+            n += 1
+            taken = None if late_every and n % late_every == 0 else s.take()
+            if taken is not None:
+                obs = taken.observation
+                got.append((round(float(obs.x_prev[3]), 6), round(float(obs.x_now[3]), 6)))
+            cycle += 0.2827
+        s.observe(_odom(t, t), S + int(t * 1e9) + 2 * MS)  # u = t: the state names its time
+    return got
+
+
+def test_the_sampler_takes_its_intervals_on_the_vessels_grid_whatever_the_cycles_phase() -> None:
+    a, b = _grid_intervals(0.013), _grid_intervals(0.171)
+    assert len(a) > 30 and a == b  # the same states paired, whatever the cycles' phase
+    for t0, t1 in a[1:]:  # each end the first sample at or after a multiple of the period
+        assert 0.5 * 0.2827 <= t1 - t0 <= 0.2827 + 0.06
+        k = math.floor((t1 + GRID_SLACK_S) / 0.2827)
+        assert -GRID_SLACK_S <= t1 - k * 0.2827 < 0.06 + 1e-9
+    # cycles skipped (a loaded machine): the intervals left are merged, never lost
+    late = _grid_intervals(0.013, late_every=4)
+    ends = {t1 for _, t1 in a}
+    assert all(t1 in ends for _, t1 in late)
+    assert all(late[i][1] == late[i + 1][0] for i in range(len(late) - 1))
 
 
 def test_the_sampler_starts_a_new_interval_when_vessel_time_goes_back() -> None:

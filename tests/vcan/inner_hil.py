@@ -465,6 +465,18 @@ def parse(argv: list[str]) -> argparse.Namespace:
 
 
 def main(argv: list[str]) -> int:
+    """One run, or several in a row separated by ``--then`` (one VM boot for all of them):
+    each writes its own summary.json; the exit status is the worst."""
+    runs: list[list[str]] = [[]]
+    for arg in argv:
+        if arg == "--then":
+            runs.append([])
+        else:
+            runs[-1].append(arg)
+    return max(run_one(args) for args in runs)
+
+
+def run_one(argv: list[str]) -> int:
     opts = parse(argv)
     opts.out.mkdir(parents=True, exist_ok=True)
     logging.basicConfig(

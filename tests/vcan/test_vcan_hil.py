@@ -97,20 +97,47 @@ def _tail(text: str, lines: int) -> str:
     return "\n".join(text.splitlines()[-lines:])
 
 
-def run_inner(out: Path, args: list[str], timeout_s: float) -> Run:
-    argv = [sys.executable, str(INNER), *args]
+@dataclass
+class Flights:
+    """The module's inner_hil.py runs, flown one after the other in one VM boot (or on this
+    host's vcan0): their folders by name and the driver's output of all of them."""
+
+    outs: dict[str, Path]
+    output: str
+    mode: str
+    elapsed_s: float
+    failed: str | None  # why the runs did not go through (a timeout), None if they did
+
+    def run(self, name: str) -> Run:
+        """The run ``name`` with its summary; fails the test if it did not go through."""
+        out = self.outs[name]
+        run = Run(out, self.output, self.mode, self.elapsed_s)
+        if self.failed is not None:
+            pytest.fail(run.why(self.failed))
+        try:
+            run.summary = json.loads((out / "summary.json").read_text())
+        except (FileNotFoundError, json.JSONDecodeError) as e:
+            pytest.fail(run.why(f"inner_hil.py {name}: no summary.json ({e})"))
+        errors = run.summary.get("errors", [])
+        assert not errors, run.why(f"inner_hil.py {name}: {errors}")
+        return run
+
+
+@pytest.fixture(scope="module")
+def flights(tmp_path_factory: pytest.TempPathFactory) -> Flights:
+    """Every run of this module in one boot: the HIL flight, the one with a mute ESC and the
+    allocator alone (each VM boot costs about half a minute of the tier)."""
+    outs = {name: tmp_path_factory.mktemp(name) for name in ("hil", "silent", "idle")}
+    argv = [sys.executable, str(INNER), *_hil_args(outs["hil"]), "--then"]
+    argv += [*_silent_args(outs["silent"]), "--then", *_idle_args(outs["idle"])]
+    timeout_s = 2 * HIL_TIMEOUT_S + IDLE_TIMEOUT_S
     try:
-        result = vcanrun.run_with_vcan(argv, cwd=REPO, timeout_s=timeout_s, writable=[out])
+        result = vcanrun.run_with_vcan(
+            argv, cwd=REPO, timeout_s=timeout_s, writable=list(outs.values())
+        )
     except vcanrun.VcanTimeout as e:
-        run = Run(out, e.output, "?", timeout_s)
-        pytest.fail(run.why(f"inner_hil.py {args[0]} timed out: {e}"))
-    run = Run(out, result.output, result.mode.value, result.elapsed_s)
-    try:
-        run.summary = json.loads((out / "summary.json").read_text())
-    except (FileNotFoundError, json.JSONDecodeError) as e:
-        pytest.fail(run.why(f"inner_hil.py {args[0]}: no summary.json ({e})"))
-    assert result.returncode == 0, run.why(f"inner_hil.py {args[0]} exit {result.returncode}")
-    return run
+        return Flights(outs, e.output, "?", timeout_s, f"inner_hil.py timed out: {e}")
+    return Flights(outs, result.output, result.mode.value, result.elapsed_s, None)
 
 
 def stop_counts(log: str) -> tuple[int, int, int]:
@@ -148,14 +175,17 @@ class Hil:
     record: list[dict[str, float]]
 
 
-@pytest.fixture(scope="module")
-def hil(tmp_path_factory: pytest.TempPathFactory) -> Hil:
-    out = tmp_path_factory.mktemp("hil")
+def _hil_args(out: Path) -> list[str]:
     args = ["hil", str(out), "--run-s", f"{RUN_S:g}", "--fault-at", f"{FAULT_AT_S:g}"]
     args += ["--fault-thruster", str(FAULT_THRUSTER), "--fault-kind", FAULT_KIND]
     args += ["--fault-value", f"{FAULT_DELTA:g}", "--step-at", f"{STEP_AT_S:g}"]
-    args += ["--step-to", *(f"{v:g}" for v in STEP_TO)]
-    run = run_inner(out, args, HIL_TIMEOUT_S)
+    return [*args, "--step-to", *(f"{v:g}" for v in STEP_TO)]
+
+
+@pytest.fixture(scope="module")
+def hil(flights: Flights) -> Hil:
+    run = flights.run("hil")
+    out = run.out
     decoded = dc.decode(dc.parse_candump((out / "capture.log").read_text()))
     with open(out / "record.csv", newline="") as fh:
         record = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
@@ -321,13 +351,16 @@ SILENT = 2  # 0-based: ESC 3 (node 22) never reports in this run
 SILENT_RUN_S = 20.0
 
 
-@pytest.fixture(scope="module")
-def silent(tmp_path_factory: pytest.TempPathFactory) -> Hil:
+def _silent_args(out: Path) -> list[str]:
     """The same set-up holding the origin for 20 s, with ESC 3 mute from the start."""
-    out = tmp_path_factory.mktemp("silent")
     args = ["hil", str(out), "--run-s", f"{SILENT_RUN_S:g}", "--fault-kind", "NONE"]
-    args += ["--step-at", "1e9", "--sim-set", f"sim.silent_thrusters=[{SILENT + 1}]"]
-    run = run_inner(out, args, HIL_TIMEOUT_S)
+    return [*args, "--step-at", "1e9", "--sim-set", f"sim.silent_thrusters=[{SILENT + 1}]"]
+
+
+@pytest.fixture(scope="module")
+def silent(flights: Flights) -> Hil:
+    run = flights.run("silent")
+    out = run.out
     return Hil(
         run,
         dc.decode(dc.parse_candump((out / "capture.log").read_text())),
@@ -360,12 +393,14 @@ def test_a_silent_esc_is_noticed_and_its_thruster_dropped(silent: Hil) -> None:
 # --- the allocator alone -----------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def idle(tmp_path_factory: pytest.TempPathFactory) -> Run:
-    out = tmp_path_factory.mktemp("idle")
+def _idle_args(out: Path) -> list[str]:
     args = ["idle", str(out), "--rate-hz", f"{IDLE_RATE_HZ:g}", "--seconds", f"{IDLE_S:g}"]
-    args += ["--down-at", f"{DOWN_AT_S:g}", "--down-s", f"{DOWN_S:g}"]
-    return run_inner(out, args, IDLE_TIMEOUT_S)
+    return [*args, "--down-at", f"{DOWN_AT_S:g}", "--down-s", f"{DOWN_S:g}"]
+
+
+@pytest.fixture(scope="module")
+def idle(flights: Flights) -> Run:
+    return flights.run("idle")
 
 
 def test_no_listener_does_not_stall_the_loop(idle: Run) -> None:

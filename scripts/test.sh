@@ -6,8 +6,9 @@
 #
 # Two runs (tests/README.md): the in-process tiers (unit, contract, closed_loop) spread over
 # the cores by pytest-xdist, then the tiers that start processes or a VM (e2e, vcan, docker)
-# one test at a time, since their claims are about timing on this machine. With arguments,
-# one plain pytest run of what they select.
+# one test at a time, since their claims are about timing on this machine, with the tests
+# marked ``alone`` (memory bounds of their own process). With arguments, one plain pytest
+# run of what they select.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ "$(id -u)" = 0 ] && [ -f tests/vcan/setup.sh ] && command -v apt-get >/dev/null; then
@@ -21,6 +22,6 @@ fi
 IN_PROCESS="unit or contract or closed_loop"
 status=0
 "$PY" -m pytest -p no:cacheprovider -n "${FTCAP_TEST_WORKERS:-auto}" --durations=10 \
-  -m "$IN_PROCESS" || status=$?
-"$PY" -m pytest -p no:cacheprovider --durations=30 -m "not ($IN_PROCESS)" || status=$?
+  -m "($IN_PROCESS) and not alone" || status=$?
+"$PY" -m pytest -p no:cacheprovider --durations=30 -m "not ($IN_PROCESS) or alone" || status=$?
 exit "$status"

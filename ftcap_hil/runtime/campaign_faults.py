@@ -7,7 +7,8 @@ its scenario file alone. Per fault, from ``rng``:
 * the onset: uniform in ``onset``; the end: onset + uniform in ``duration``, or never;
 * the severity, by kind: ``dead`` delta 0; ``partial`` delta uniform in ``partial_delta``;
   ``bias`` delta 1 and a force of random sign, uniform in ``bias`` x the thruster's range;
-  ``stuck`` delta 0 and such a force from ``stuck`` (stuck at a constant thrust);
+  ``stuck`` delta 0 and such a force from ``stuck`` (stuck at a constant thrust; with
+  ``causes``, cause ``held`` and labelled so: a silent drive holding that force);
   ``intermittent`` dead for uniform(``intermittent_on``) s, healthy for
   uniform(``intermittent_off``) s, repeated from the onset to the end; ``ramp`` delta falling
   linearly from 1 to uniform(``ramp_delta``) over uniform(``ramp_s``) s; ``frozen`` the
@@ -56,6 +57,15 @@ class GeneratedFault:
     kind: DrawnKind
     tables: tuple[dict[str, Any], ...]
 
+    @property
+    def label(self) -> str:
+        """The results' kind label: the drawn kind, but ``held`` for a ``stuck`` fault whose
+        cause says so (a drive fallen silent with its force left on the hull: only the motion
+        can see it), so that a per-kind table never calls it a frozen shaft."""
+        if any(t.get("cause") == Cause.HELD.value for t in self.tables):
+            return Cause.HELD.value
+        return self.kind.value
+
 
 def _uniform(rng: np.random.Generator, r: Range) -> float:
     return float(rng.uniform(r[0], r[1])) if r[1] > r[0] else r[0]
@@ -86,6 +96,8 @@ def _with_cause(
     that switching causes on does not shift the other draws)."""
     options = CAUSES.get(kind, ())
     pick = int(rng.integers(len(options))) if options else 0
+    if spec.causes and kind is DrawnKind.STUCK:  # its one cause, written out (no draw)
+        return tuple({**t, "cause": Cause.HELD.value} for t in tables)
     if not spec.causes or not options:
         return tuple(tables)
     return tuple({**t, "cause": options[pick].value} for t in tables)

@@ -32,6 +32,7 @@ from ftcap_hil.config.realistic import anchor_preset
 from ftcap_hil.config.scenario import SHIPPED, parse_scenario
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.errors import ConfigError
+from ftcap_hil.core.faults import EventKind
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.campaign_metrics import classify
@@ -40,6 +41,8 @@ from ftcap_hil.runtime.campaign_faults import random_faults
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
 FROZEN = "frozen"  # the kind of a thruster whose output is frozen ([[fault]] kind = "stuck")
+# Scenario-file faults whose time profile is their kind (a ramp is no step to "partial")
+NAMED_EVENTS = {EventKind.RAMP: "ramp", EventKind.INTERMITTENT: "intermittent"}
 
 
 def deep_merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
@@ -141,17 +144,25 @@ def _length(sc: Scenario, given: float | None) -> float:
 def schedule_kinds(sc: Scenario) -> dict[int, str]:
     """The kind of each faulty thruster in a scenario's own schedule: ``frozen`` for an
     output frozen at its onset value (``kind = "stuck"``: the schedule flags it, delta 1 and
-    f 0 stay nominal), the metrics' ``classify`` of delta and f for every other fault, and
-    ``mixed`` for a thruster frozen at some times and otherwise faulty at others."""
+    f 0 stay nominal), the kind the file names for a ``ramp`` or ``intermittent`` fault, the
+    metrics' ``classify`` of delta and f for every other fault, and ``mixed`` for a thruster
+    with faults of several of these kinds."""
     times = [t for t in sc.faults.change_times() if t < sc.duration_s]
     truths = [sc.faults.at(t) for t in times]
     out = {}
     for i in range(sc.thrusters.m):
         frozen = any(tr.stuck[i] for tr in truths)
+        named = {
+            NAMED_EVENTS[e.kind]
+            for e in sc.faults.events
+            if e.kind in NAMED_EVENTS and e.thruster in (None, i) and e.start < sc.duration_s
+        }
         other = [tr for tr in truths if not tr.stuck[i] and (tr.delta[i] != 1 or tr.f[i] != 0)]
         if other:
             kind = classify(np.array([tr.delta[i] for tr in other]),
                             np.array([tr.f[i] for tr in other]))  # fmt: skip
+            if named:
+                kind = named.pop() if len(named) == 1 else "mixed"
             out[i] = "mixed" if frozen else kind
         elif frozen:
             out[i] = FROZEN
@@ -188,7 +199,7 @@ def _random_cases(
             gen = random_faults(rng, u_range, sc.duration_s, spec.faults, kind)
         except ValueError as e:
             raise ConfigError(f"{spec.source}: scenario {entry.label}: {e}") from e
-        kinds = {g.thruster: g.kind.value for g in gen}
+        kinds = {g.thruster: g.label for g in gen}
         tables = [t for g in gen for t in g.tables]
         name = f"{entry.label}/s{seed}" + (f"/{label}" if label else "")
         cases.append(Case(name, entry.label, seed, False, _run_kind(kinds),

@@ -74,8 +74,15 @@ class OdometryMailbox(Mailbox[Odometry]):
 
     def received_after(self, after_ns: int, upto_ns: int) -> list[Stamped[Odometry]]:
         """The samples kept that were received in (``after_ns``, ``upto_ns``], oldest first."""
+        out: list[Stamped[Odometry]] = []
         with self._rev_lock:
-            return [s for s in self._recent if after_ns < s.stamp_ns <= upto_ns]
+            for s in reversed(self._recent):  # newest first: stop at the first one taken
+                if s.stamp_ns <= after_ns:
+                    break
+                if s.stamp_ns <= upto_ns:
+                    out.append(s)
+        out.reverse()
+        return out
 
     def reversals_since(self, since_ns: int) -> int:
         """Reversals noted at or after ``since_ns`` (monotonic ns)."""

@@ -26,7 +26,12 @@ from tests.support.mavlink_peers import (
     wait_until,
 )
 
-pytestmark = [pytest.mark.timeout(120), pytest.mark.usefixtures("no_leaked_threads")]
+# alone: its memory bounds are this process's resident size (tests/README.md)
+pytestmark = [
+    pytest.mark.timeout(120),
+    pytest.mark.usefixtures("no_leaked_threads"),
+    pytest.mark.alone,
+]
 
 SYS, COMP = ALLOCATOR_IDS
 PARAMS = [

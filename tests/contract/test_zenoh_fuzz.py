@@ -36,7 +36,8 @@ from ftcap_hil.core.messages import WrenchSetpoint
 from ftcap_hil.ports.mailbox import Mailbox
 from ftcap_hil.runtime.processes import free_port, wait_until
 
-pytestmark = pytest.mark.timeout(300)
+# alone: its memory bounds are this process's resident size (tests/README.md)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.alone]
 
 ROOT = Path(__file__).resolve().parents[2]
 VESSEL = "fuzz"

@@ -169,52 +169,6 @@ def test_a_dying_child_stops_the_demo_with_an_error(tmp_path: Path) -> None:
         reap(proc, out)
 
 
-@pytest.mark.timeout(400)
-def test_second_onset_flags_only_the_faulty_thrusters(tmp_path: Path) -> None:
-    """The compressed example 1 through its second onset (45 s: thruster 1 delta 0.8,
-    thruster 3 dead with a 0.01 N bias, and the turn to [2, 2, pi] that saturates every
-    thruster). Healthy thrusters 2 and 4 must never be flagged. They were (delta_hat 0.27 and
-    0.65 for 10-25 s) while the simulated vessel applied each command from the start of the
-    sim step in which it arrived, up to 20 ms before the allocator sent it: the allocator's
-    command averages then mismatched the vessel's motion by ~2 % of full scale at every
-    large command change, and the few samples of the restarted window believed it."""
-    shipped = Path(__file__).parents[2] / "ftcap_hil/data/hil/missions/paper-4.2-ex1-short.toml"
-    text = shipped.read_text().replace("duration = 140.0", "duration = 75.0")
-    assert "duration = 75.0" in text
-    mission = tmp_path / "ex1-to-75s.toml"
-    mission.write_text(text)
-    out = tmp_path / "out"
-    argv = ftcap_hil("demo", "--mission", str(mission), "--out", str(out), "--no-plots")
-    proc = start("demo", argv, tmp_path)
-    try:
-        code = proc.wait(75.0 + 150)
-    finally:
-        reap(proc, out)
-    assert code == 0, stderr_of(proc)[-3000:]
-    log = (out / "logs" / "allocator.log").read_text()
-    flagged = [ln for ln in log.splitlines() if "fault detected" in ln]
-    warned = [ln for ln in log.splitlines() if "WARNING" in ln]  # the why, if it fails
-    assert not [ln for ln in flagged if "thruster 2 " in ln or "thruster 4 " in ln], warned
-    assert any("thruster 3 fault detected" in ln for ln in flagged), flagged
-    # When thruster 3 is found dead depends on which way the vessel turns to psi = pi (the
-    # sign of its heading error at 45 s, noise): one way its command saturates at -0.1 and
-    # delta_hat_3 reaches 0 within ~2 s; the other way it saturates at +0.1, delta_3 u_3 + f_3
-    # cannot be told from a bias while the command is constant, and it is found when the
-    # command leaves saturation, 11-14 s after the onset (measured). Either way: once
-    # delta_hat_3 is under the 0.1 dead threshold it stays there (not pinned near 0: one CI
-    # run measured 0.06-0.09 after a large command change) and thruster 3 gets nothing but
-    # recovery probes (0.01 N); the healthy ones stay above the flag level.
-    rows = [r for r in _rows(out) if r["t"] > 45.0]
-    t_dead = next((r["t"] for r in rows if r["delta_hat_3"] < 0.1), None)
-    assert t_dead is not None, [round(r["delta_hat_3"], 2) for r in rows]
-    after = [r for r in rows if r["t"] > t_dead + 0.6]  # the next cycle has it out
-    assert after and all(r["delta_hat_3"] < 0.1 for r in after), [r["delta_hat_3"] for r in after]
-    assert all(abs(r["u_3"]) <= 0.0101 for r in after), [r["u_3"] for r in after]
-    healthy = [(r["delta_hat_2"], r["delta_hat_4"]) for r in rows if r["t"] > 50.0]
-    assert all(min(pair) > 0.85 for pair in healthy), healthy
-    print(f"\nthruster 3 found dead {t_dead - 45.2:.1f} s after the second onset")
-
-
 @pytest.mark.timeout(300)
 def test_the_demos_mcap_holds_every_channel_and_the_csvs_values(demo: DemoRun) -> None:
     assert demo.returncode == 0, demo.stderr[-3000:]

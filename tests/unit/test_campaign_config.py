@@ -293,6 +293,16 @@ def test_the_new_kinds_give_ramps_frozen_outputs_transients_doubles_and_lost_tel
     assert seen_causes == {"drive-dead", "power-lost", "jammed"}
     plain = random_faults(np.random.default_rng(1), u_range, 300.0, FaultSpec(), DrawnKind.DEAD)
     assert "cause" not in plain[0].tables[0]  # causes off: the default of its delta
+    # delta 0 with a force left: with causes, a silent drive holding it, labelled so; the
+    # draws are those of causes off (its one cause costs no draw)
+    (held,) = random_faults(np.random.default_rng(3), u_range, 300.0, spec, DrawnKind.STUCK)
+    (stuck,) = random_faults(
+        np.random.default_rng(3), u_range, 300.0, FaultSpec(count=1, onset=(10.0, 20.0)),
+        DrawnKind.STUCK,
+    )  # fmt: skip
+    assert (held.tables[0]["cause"], held.label) == ("held", "held")
+    assert "cause" not in stuck.tables[0] and stuck.label == "stuck"
+    assert {k: v for k, v in held.tables[0].items() if k != "cause"} == stuck.tables[0]
     with pytest.raises(ValueError, match="each_kind"):
         random_faults(
             np.random.default_rng(1), u_range, 300.0, FaultSpec(kinds=(DrawnKind.DOUBLE,))

@@ -69,6 +69,20 @@ def test_schedule_kinds_tells_a_frozen_output_from_the_other_faults() -> None:
     assert schedule_kinds(sc) == {0: "mixed", 1: "frozen", 2: "partial"}
 
 
+def test_schedule_kinds_keeps_the_kind_a_file_names_for_ramps_and_intermittent_faults() -> None:
+    """A ramp in a scenario file was labelled ``partial`` (its delta below 1), an
+    intermittent fault ``dead``: the per-kind tables then mixed them with steps."""
+    ramp = {"from": 5.0, "thruster": 1, "kind": "ramp", "delta": 0.3, "ramp_s": 10.0}
+    spells = {"from": 5.0, "until": 25.0, "thruster": 2, "kind": "intermittent", "delta": 0.0}
+    spells |= {"on_s": 2.0, "off_s": 3.0}
+    step = {"from": 12.0, "thruster": 3, "delta": 0.5}
+    late_ramp = {"from": 20.0, "thruster": 3, "kind": "ramp", "delta": 0.0, "ramp_s": 5.0}
+    sc = parse_scenario(_paper([ramp, spells, step, late_ramp]), "kinds.toml")
+    assert schedule_kinds(sc) == {0: "ramp", 1: "intermittent", 2: "ramp"}
+    sc = parse_scenario(_paper([ramp, spells, step], duration_s=30.0), "kinds.toml")
+    assert schedule_kinds(sc)[2] == "partial"  # a step stays what its values say
+
+
 def test_the_offline_loop_freezes_the_output_and_records_it_as_not_nominal() -> None:
     sc = parse_scenario(_paper([FROZEN_2]), "frozen.toml")
     rec = run_mode(sc, Mode.CAP)

@@ -8,7 +8,14 @@ import numpy as np
 
 from ftcap_hil.core.messages import Odometry
 from ftcap_hil.ports.mailbox import Mailbox
-from ftcap_hil.runtime.telemetry_guard import OdometryMailbox, TelemetryGuard, TelemetryPort
+from ftcap_hil.ports.transitions import TransitionLog
+from ftcap_hil.runtime.estimation import EstimationSampler
+from ftcap_hil.runtime.telemetry_guard import (
+    OdometryMailbox,
+    TelemetryGuard,
+    TelemetryIntake,
+    TelemetryPort,
+)
 
 S = 1_000_000_000
 
@@ -85,3 +92,27 @@ def test_the_exit_line_counts_the_gates_drops_with_the_malformed(caplog) -> None
     with caplog.at_level(logging.INFO, logger="ftcap_hil.apps.allocator"):
         _log_summary(daemon)
     assert "2 malformed inputs dropped (1 of them implausible telemetry)" in caplog.text
+
+
+def test_the_intake_hands_the_sampler_every_sample_since_the_last_cycle() -> None:
+    """A cycle every 0.25 s reads the newest sample; the grid's ends are the samples at or
+    after each 0.2827 s, which a cycle rarely reads: the intake hands over every sample of
+    the port in use received since the last cycle. (The newest sample alone gave intervals
+    of 0.5 s here: 0.25 s is under 0.9 periods.)"""
+    mav, zen = OdometryMailbox("mavlink.odometry"), OdometryMailbox("zenoh.odometry")
+    guard = TelemetryGuard([TelemetryPort(mav, True), TelemetryPort(zen, False)])
+    sampler = EstimationSampler(period_s=0.2827, use_vessel_clock=False)
+    sampler.command_sent(0, np.ones(4))
+    intake = TelemetryIntake(guard, sampler, TransitionLog(lambda *_: None), fresh_s=1.0)
+    ends = []
+    for k in range(1, 61):  # 20 Hz on both ports (Zenoh's copy 1 ms later)
+        mav.put(odo(0.05 * k), 10 * S + k * 50_000_000)
+        zen.put(odo(0.05 * k), 10 * S + k * 50_000_000 + 1_000_000)
+        if k % 5 == 0:  # a cycle every 0.25 s, just after the sample at 0.25 j s
+            got = intake.sample(10 * S + k * 50_000_000 + 2_000_000, stale=False)
+            if got is not None:
+                ends.append(round(got.observation.dt_s, 6))
+    # ends at 0.3, 0.6, 0.85 (>= 0.848), 1.15, 1.45, 1.7, ...: dt 0.30 or 0.25, never 0.6
+    assert len(ends) >= 9 and set(ends) == {0.25, 0.3}, ends
+    box = mav.received_after(10 * S + 55 * 50_000_000, 10 * S + 58 * 50_000_000)
+    assert [round(s.value.time_s, 6) for s in box] == [2.8, 2.85, 2.9]

@@ -58,7 +58,8 @@ from tests.docker.compose_local import (
     local_compose,
     local_executable,
 )
-from tests.support.second_onset import check_second_onset, timeseries
+from tests.support.records import float_rows
+from tests.support.second_onset import check_second_onset
 
 FLIGHT_S = 75.0  # through the second onset at 45 s (module docstring)
 
@@ -155,7 +156,7 @@ def test_compose_up_flies_the_mission_as_local_processes(
     out = run.world.mounts[EXIT_SERVICE]["/out"]
     check_results(out, mission)
     allocator_log = run.procs["allocator"].log.read_text(errors="replace")
-    found = check_second_onset(allocator_log, timeseries(out / "ftcap" / "timeseries.csv"))
+    found = check_second_onset(allocator_log, float_rows(out / "ftcap" / "timeseries.csv"))
     print(f"\nthruster 3 found dead {found:.1f} s after the second onset")
 
 

@@ -4,7 +4,6 @@ and cleans up after itself, also when interrupted or when a child dies."""
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import signal
@@ -25,6 +24,7 @@ from tests.e2e.demo_support import (
     stderr_of,
     wait_for,
 )
+from tests.support.records import float_rows
 from tests.support.ros2_reference import read_mcap
 
 pytestmark = pytest.mark.e2e
@@ -54,8 +54,7 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DemoRun]:
 
 
 def _rows(out: Path) -> list[dict[str, float]]:
-    with open(out / "ftcap" / "timeseries.csv", newline="") as fh:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+    return float_rows(out / "ftcap" / "timeseries.csv")
 
 
 @pytest.mark.timeout(300)

@@ -22,6 +22,7 @@ import pytest
 
 from ftcap_hil.apps.demo import Ports, allocator_argv, gcs_argv, vessel_argv
 from ftcap_hil.runtime.processes import Child, Supervisor, start_can_hub, wait_until
+from tests.support.records import float_rows
 
 pytestmark = pytest.mark.e2e
 
@@ -80,10 +81,7 @@ def _flown(results: dict) -> None:
 
 
 def _rows(out: Path) -> list[dict[str, float]]:
-    import csv
-
-    with open(out / "flight" / "ftcap" / "timeseries.csv", newline="") as fh:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+    return float_rows(out / "flight" / "ftcap" / "timeseries.csv")
 
 
 @pytest.mark.timeout(240)

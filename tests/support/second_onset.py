@@ -14,16 +14,7 @@ deadlines against the vessel's steps; they now lie on the vessel's grid.
 
 from __future__ import annotations
 
-import csv
-from pathlib import Path
-
 ONSET_S = 45.0
-
-
-def timeseries(path: Path) -> list[dict[str, float]]:
-    """The rows of a ground station's ``<mode>/timeseries.csv``."""
-    with open(path, newline="") as fh:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
 
 
 def check_second_onset(allocator_log: str, rows: list[dict[str, float]]) -> float:

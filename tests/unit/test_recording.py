@@ -3,7 +3,6 @@ channel decodes from the file's own schemas, and the messages agree with the CSV
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import functools
 import json
@@ -26,6 +25,7 @@ from ftcap_hil.report.recording import CHANNELS, LogLine, write_mcap
 from ftcap_hil.report.records import RunRecord, write_csv
 from ftcap_hil.runtime.offline import run_mode
 from tests.support.no_transports import env_without_transports
+from tests.support.records import float_rows
 from tests.support.ros2_reference import read_mcap
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,9 +42,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[dict[str
     out = tmp_path_factory.mktemp("rec")
     write_csv(record(), out / "timeseries.csv")
     write_mcap(record(), out / "run.mcap", logs=[LogLine(1.0, "hello from the run")])
-    with open(out / "timeseries.csv") as fh:
-        rows = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
-    return out / "run.mcap", rows
+    return out / "run.mcap", float_rows(out / "timeseries.csv")
 
 
 def test_the_mcap_package_reads_and_validates_it(files: tuple[Path, Any]) -> None:

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from tests.support.records import float_rows
 from tests.vcan import decode_capture as dc
 from tests.vcan import inner_hil, vcanrun
 
@@ -187,14 +188,12 @@ def hil(flights: Flights) -> Hil:
     run = flights.run("hil")
     out = run.out
     decoded = dc.decode(dc.parse_candump((out / "capture.log").read_text()))
-    with open(out / "record.csv", newline="") as fh:
-        record = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
     return Hil(
         run,
         decoded,
         read_commands(out / "commands.csv"),
         json.loads((out / "status.json").read_text()),
-        record,
+        float_rows(out / "record.csv"),
     )
 
 

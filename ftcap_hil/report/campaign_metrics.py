@@ -28,6 +28,12 @@ allocation, the effectiveness the allocator used below its dead threshold).
   removed: healthy thruster-seconds.
 * Deviation: horizontal distance to the fault-free (``none``) run of the same case;
   tracking error: to the reference. Both per fault phase (RMS and max).
+* Cause: what physically happened at the episode's onset (the truth's cause); *drive
+  visible* when the drive's own telemetry shows it (:data:`DRIVE_VISIBLE`: dead, jammed,
+  frozen shaft, lost blade, a weak motor down by ``WEAK_VISIBLE`` or more); the drive's
+  *verdict*: the hypothesis its diagnosis gave most often while the thruster was isolated
+  in the episode; the cause is *named* when that verdict is the one the cause shows
+  (:data:`NAMED_BY`).
 
 A delay that never happens is None (JSON null).
 """
@@ -42,10 +48,33 @@ from typing import Any
 import numpy as np
 
 from ftcap_hil.config.campaign import MetricParams
+from ftcap_hil.core.estimation.shaft_types import HYPOTHESES_BY_CODE, Hypothesis
+from ftcap_hil.core.faults import Cause, default_cause
 from ftcap_hil.core.messages import BoolArray, FloatArray
 from ftcap_hil.report.records import RunRecord
 
 KINDS = ("dead", "stuck", "frozen", "partial", "bias", "mixed", "intermittent")
+
+#: The causes a drive's telemetry shows by itself (speed, current): issue 29's
+#: "drive-visible" faults; a weak motor only from this loss of force on (delta <= 0.7).
+DRIVE_VISIBLE = frozenset(
+    {Cause.DRIVE_DEAD, Cause.JAMMED, Cause.STUCK, Cause.LOST_BLADE, Cause.WEAK_MOTOR}
+)
+WEAK_VISIBLE = 0.3
+#: The drive's verdict that names each cause.
+NAMED_BY: dict[Cause, Hypothesis] = {
+    Cause.DRIVE_DEAD: Hypothesis.DRIVE_DEAD,
+    Cause.JAMMED: Hypothesis.JAMMED,
+    Cause.STUCK: Hypothesis.STUCK,
+    Cause.WEAK_MOTOR: Hypothesis.WEAK,
+    Cause.LOST_BLADE: Hypothesis.LOAD_LOSS,
+    Cause.FOULED: Hypothesis.LOAD_GAIN,
+    Cause.POWER_LOST: Hypothesis.TELEMETRY_LOST,
+    Cause.HELD: Hypothesis.TELEMETRY_LOST,
+    Cause.TELEMETRY_LOST: Hypothesis.TELEMETRY_LOST,
+    Cause.VENTILATION: Hypothesis.VENTILATION,
+    Cause.HULL_LOSS: Hypothesis.HEALTHY,
+}
 
 
 @dataclass(frozen=True)
@@ -137,6 +166,7 @@ class _Run:
         self.delta, self.f = _stack(rec, "delta"), _stack(rec, "f")
         self.dh, self.fh = _stack(rec, "delta_hat"), _stack(rec, "f_hat")
         self.flag = _stack(rec, "faulty") > 0.5
+        self.drive = _stack(rec, "drive") if "drive_1" in rec.columns else None
         self.dead = _stack(rec, "dead") > 0.5
         self.hold = max(1, int(round(p.recovery_hold_s / self.dt)))
         self.healthy = (self.delta == 1.0) & (self.f == 0.0)
@@ -215,8 +245,34 @@ def fault_metrics(r: _Run, ep: Episode, limit: int, p: MetricParams) -> dict[str
         "converge_s": None if conv is None else float(r.t[conv] - r.t[a]),
         "deviation_rms": None if r.dev is None else _rms(r.dev[a:b]),
     }
+    out.update(_cause(r, ep))
     out.update(_recovery(r, ep, limit, p))
     return out
+
+
+def _cause(r: _Run, ep: Episode) -> dict[str, Any]:
+    """The episode's true cause, whether the drive can show it, the drive's verdict while
+    the thruster was isolated and whether it names the cause (module docstring)."""
+    i, a, b = ep.thruster, ep.start, ep.end
+    delta_min = float(np.min(r.delta[a:b, i]))
+    cause = r.rec.scenario.faults.at(float(r.t[a])).causes()[i]
+    if cause is Cause.HEALTHY:  # a record whose truth is not its scenario's schedule
+        cause = default_cause(delta_min, False, float(np.max(np.abs(r.f[a:b, i]))))
+    visible = cause in DRIVE_VISIBLE and (
+        cause is not Cause.WEAK_MOTOR or delta_min <= 1.0 - WEAK_VISIBLE
+    )
+    verdict = None
+    if r.drive is not None:
+        codes = r.drive[a:b, i][r.isolated[a:b, i]]
+        codes = codes[np.isfinite(codes) & (codes >= 1)].astype(int)  # 0: no diagnosis
+        if codes.size:
+            verdict = HYPOTHESES_BY_CODE[int(np.bincount(codes).argmax())]
+    return {
+        "cause": cause.value,
+        "drive_visible": visible,
+        "drive_verdict": None if verdict is None else verdict.value,
+        "cause_named": None if verdict is None else verdict is NAMED_BY.get(cause),
+    }
 
 
 def _episode_count(mask: BoolArray, healthy: BoolArray, merge: int) -> int:

@@ -21,7 +21,7 @@ from ftcap_hil.report.campaign_summary import (
     run_groups,
     write_tables,
 )
-from ftcap_hil.report.campaign_sweep import headline_rows, sweep_rows
+from ftcap_hil.report.campaign_sweep import drive_visible_rows, headline_rows, sweep_rows
 
 RUN_COLUMNS = (
     ("mode", "mode"),
@@ -59,6 +59,13 @@ FAULT_COLUMNS = (
     ("recovery med (s)", "recovery_median"),
     ("recovery p95", "recovery_p95"),
 )
+VISIBLE_COLUMNS = (
+    ("faults", "faults"),
+    ("iso. <= 2 s", "isolated_2s"),
+    ("iso. <= 5 s", "isolated_5s"),
+    ("never", "never"),
+    ("cause named", "named"),
+)
 PERCENT = {
     "healthy_flagged_frac",
     "healthy_removed_frac",
@@ -70,9 +77,11 @@ PERCENT = {
     "never_isolated_share",
     "recovered_share",
     "harm_share",
+    "isolated_2s",
     "isolated_5s",
     "isolated_30s",
     "never",
+    "named",
 }
 
 
@@ -254,11 +263,36 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "",
         *markdown_table(sweep_rows(rows, fault_rows(rows)), SWEEP_COLUMNS),
         "",
+        *_visible_section(fault_rows(rows)),
         "## Failed runs",
         "",
         *_failed(rows),
     ]
     return "\n".join(out) + "\n"
+
+
+def _visible_section(faults: list[Row]) -> list[str]:
+    """The drive-visible faults per scenario and per cause (campaign_sweep)."""
+    rows = drive_visible_rows(faults, "scenario")
+    if not rows:
+        return []
+    columns = [("mode", "mode"), ("scenario", "scenario"), *VISIBLE_COLUMNS]
+    return [
+        "## Drive-visible faults",
+        "",
+        "The faults a drive's own telemetry shows (drive dead, jammed, frozen shaft, lost "
+        "blade, a weak motor down by 30 % or more), one per thruster and run: isolated "
+        "within 2 s, within 5 s and never, and the share isolated with the drive's verdict "
+        "naming the cause (Wilson 95 %, n faults); per scenario, then per cause.",
+        "",
+        *markdown_table(rows, columns),
+        "",
+        *markdown_table(
+            drive_visible_rows(faults, "cause"),
+            [*columns[:1], ("cause", "cause"), *VISIBLE_COLUMNS],
+        ),  # fmt: skip
+        "",
+    ]
 
 
 PLOT_CAPTIONS = {

@@ -72,10 +72,33 @@ def sweep_rows(rows: list[Row], faults: list[Row]) -> list[Row]:
     return out + _healthy_rows(rows, order)
 
 
-def _shares(row: Row, delays: list[float]) -> None:
+VISIBLE_WITHIN_S = (2.0, 5.0)  # the targets: CyberShip II within 2 s, the supply vessel 5 s
+
+
+def drive_visible_rows(faults: list[Row], by: str) -> list[Row]:
+    """The faults a drive's telemetry shows by itself (``drive_visible``; per run:
+    :func:`faults_per_run`), per mode and ``by`` (``scenario`` or ``cause``): isolated
+    within 2 s, 5 s, never, and the share whose isolation the drive's verdict named right
+    (``cause_named``) among all of them; estimating modes only."""
+    groups: dict[tuple[str, str], list[Row]] = defaultdict(list)
+    order: dict[str, int] = {}
+    for f in faults_per_run(faults):
+        order.setdefault(str(f[by]), len(order))
+        if f["mode"] not in ("none", "cap", "oracle") and f.get("drive_visible"):
+            groups[(f["variant"], str(f[by]))].append(f)
+    out = []
+    for (variant, key), g in sorted(groups.items(), key=lambda kv: (kv[0][0], order[kv[0][1]])):
+        row: Row = {"mode": variant, by: key, "faults": len(g)}
+        _shares(row, [_delay(f) for f in g], VISIBLE_WITHIN_S)
+        put_interval(row, "named", wilson_share(sum(bool(f.get("cause_named")) for f in g), len(g)))
+        out.append(row)
+    return out
+
+
+def _shares(row: Row, delays: list[float], within: tuple[float, ...] = WITHIN_S) -> None:
     """The isolated-within and never shares of ``delays`` (inf: never) into ``row``."""
     n = len(delays)
-    for limit in WITHIN_S:
+    for limit in within:
         put_interval(row, f"isolated_{limit:g}s", wilson_share(sum(d <= limit for d in delays), n))
     put_interval(row, "never", wilson_share(sum(math.isinf(d) for d in delays), n))
 

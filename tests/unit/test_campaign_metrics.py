@@ -16,7 +16,8 @@ import pytest
 
 from ftcap_hil.config.campaign import HarmBasis, MetricParams
 from ftcap_hil.config.scenario import load_scenario
-from ftcap_hil.core.faults import FaultEvent, FaultSchedule
+from ftcap_hil.core.estimation.shaft_types import HYPOTHESIS_CODES, Hypothesis
+from ftcap_hil.core.faults import Cause, FaultEvent, FaultSchedule
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
 from ftcap_hil.report.campaign_metrics import (
@@ -450,3 +451,59 @@ def test_the_oracle_on_a_real_run_detects_and_isolates_at_once() -> None:
     assert row["detection_delay_s"] == 0.0 and row["isolation_delay_s"] == 0.0
     assert row["delta_error"] == 0.0 and row["correct_isolation"] is True
     assert out["false_alarms"] == 0 and out["deviation_max"] > 0.0
+
+
+def _cause_row(cause: Cause, delta: float, verdict: Hypothesis | None) -> dict[str, Any]:
+    """Thruster 2 faulty from 10 s with ``cause`` in the schedule, isolated from 11 s on
+    with ``verdict`` as its drive's hypothesis (None: no diagnosis, code 0)."""
+    rec = Synthetic(40.0)
+    event = FaultEvent(10.0, math.inf, 1, np.array(delta), None, cause=cause)
+    rec.sc = dataclasses.replace(rec.sc, faults=FaultSchedule(4, (event,)))
+    rec.set("delta_2", 10.0, math.inf, delta)
+    rec.set("faulty_2", 11.0, math.inf, 1.0)
+    if verdict is not None:
+        rec.set("drive_2", 10.0, 11.0, HYPOTHESIS_CODES[Hypothesis.HEALTHY])
+        rec.set("drive_2", 11.0, math.inf, HYPOTHESIS_CODES[verdict])
+    (row,) = run_metrics(rec.record(), None, PARAMS)["faults"]
+    return row
+
+
+def test_a_fault_row_names_its_cause_what_the_drive_can_show_and_what_it_said() -> None:
+    row = _cause_row(Cause.JAMMED, 0.0, Hypothesis.JAMMED)
+    assert (row["cause"], row["drive_visible"]) == ("jammed", True)
+    assert (row["drive_verdict"], row["cause_named"]) == ("jammed", True)
+    # the verdict is what the drive said while isolated, not before
+    row = _cause_row(Cause.DRIVE_DEAD, 0.0, Hypothesis.LOAD_GAIN)
+    assert (row["drive_verdict"], row["cause_named"]) == ("load-gain", False)
+    # a silent drive and a hull loss are not the drive's to see; a light weak motor neither
+    assert not _cause_row(Cause.POWER_LOST, 0.0, None)["drive_visible"]
+    assert not _cause_row(Cause.HULL_LOSS, 0.5, None)["drive_visible"]
+    assert not _cause_row(Cause.WEAK_MOTOR, 0.8, Hypothesis.WEAK)["drive_visible"]
+    assert _cause_row(Cause.WEAK_MOTOR, 0.7, Hypothesis.WEAK)["drive_visible"]
+    row = _cause_row(Cause.LOST_BLADE, 0.5, None)  # no diagnosis: no verdict
+    assert (row["drive_verdict"], row["cause_named"]) == (None, None)
+
+
+def test_the_drive_visible_table_counts_a_run_once_and_its_named_causes() -> None:
+    from ftcap_hil.report.campaign_sweep import drive_visible_rows
+
+    def fault(key: str, cause: str, delay: float | None, named: bool | None) -> dict[str, Any]:
+        return {"key": key, "thruster": 1, "mode": "ftcap", "variant": "ftcap",
+                "scenario": "s", "cause": cause, "onset_s": 10.0, "detectable": True,
+                "drive_visible": cause != "power-lost", "isolation_delay_s": delay,
+                "cause_named": named}  # fmt: skip
+
+    rows = drive_visible_rows(
+        [fault("a", "jammed", 1.0, True), fault("b", "jammed", 3.0, False),
+         fault("c", "drive-dead", None, None), fault("d", "power-lost", 0.5, True)],
+        "scenario",
+    )  # fmt: skip
+    (row,) = rows
+    assert row["faults"] == 3 and row["isolated_2s"] == pytest.approx(1 / 3)
+    assert row["isolated_5s"] == pytest.approx(2 / 3) and row["never"] == pytest.approx(1 / 3)
+    assert row["named"] == pytest.approx(1 / 3) and row["named_n"] == 3
+    by_cause = {
+        r["cause"]: r["faults"]
+        for r in drive_visible_rows([fault("a", "jammed", 1.0, True)], "cause")
+    }
+    assert by_cause == {"jammed": 1}

@@ -37,6 +37,7 @@ hypothesis per thruster (:class:`Hypothesis`) and the effectiveness its drive sh
     speed off, |n_m| ~ 0, current near idle      DRIVE_DEAD      0
     speed off, |n_m| ~ 0, current drawn          JAMMED          0
     speed flat while the command moves           STUCK           0, its held force k_T n_m|n_m|
+      (measurably: floor_z bands, for stuck_hold_s; or after a speed alarm)
     speed low, load consistent                   WEAK            (n_m / n_p)^2
     load low for hold_s, thrust consistent       LOAD_LOSS       torque ratio (lost blade)
     load high for hold_s                         LOAD_GAIN       2 - torque ratio (fouling)
@@ -231,7 +232,10 @@ class ShaftDiagnoser:
         h, h_load = self.config.cusum_h, self.config.load_h
         if ch.thrust.high > h and not ch.thrust.low > h and not self._flat(ch):
             ch.thrust.high = 0.0  # more thrust than asked and following the command: no fault
-        if ch.thrust.low > h or ch.thrust.high > h:
+        # a shaft held still while its command moves measurably: frozen, whatever the sign
+        # of the residuals (a command swinging about the held speed resets either CUSUM)
+        ch.frozen_s = ch.frozen_s + self._sample_gap(ch) if self._frozen(ch) else 0.0
+        if ch.thrust.low > h or ch.thrust.high > h or ch.frozen_s >= self.config.stuck_hold_s:
             ch.hyp = self._thrust_cause(ch, n_m, n_p, current_a)
         elif ch.load.low > h_load:
             ch.hyp = Hypothesis.VENTILATION
@@ -260,17 +264,29 @@ class ShaftDiagnoser:
             return Hypothesis.STUCK
         return Hypothesis.WEAK
 
+    @staticmethod
+    def _moves(ch: Channel) -> tuple[float, float, float]:
+        """Over ``stuck_window_s``: how far the prediction moved, how far the measured speed
+        did, and the prediction's size (0, 0, 1 with fewer than three samples)."""
+        if len(ch.recent) < 3:
+            return 0.0, 0.0, 1.0
+        speeds = [r[1] for r in ch.recent]
+        preds = [r[2] for r in ch.recent]
+        scale = max(abs(p) for p in preds) or 1.0
+        return max(preds) - min(preds), max(speeds) - min(speeds), scale
+
     def _flat(self, ch: Channel) -> bool:
         """The speed held (within a fifth of it) while the prediction moved by more than 5 %
         of its size over ``stuck_window_s``."""
-        if len(ch.recent) < 3:
-            return False
-        speeds = [r[1] for r in ch.recent]
-        preds = [r[2] for r in ch.recent]
-        moved = max(preds) - min(preds)
-        held = max(speeds) - min(speeds)
-        scale = max(abs(p) for p in preds) or 1.0
+        moved, held, scale = self._moves(ch)
         return moved > 0.05 * scale and held < 0.2 * moved
+
+    def _frozen(self, ch: Channel) -> bool:
+        """:meth:`_flat`, and the prediction's move measurable: ``floor_z`` bands at the
+        speed it runs (a healthy drive, even one lagging 1 + ``lag_uncertainty`` times its
+        data sheet, follows such a move by more than half of it; a frozen shaft not at all)."""
+        moved, _, _ = self._moves(ch)
+        return self._flat(ch) and moved >= self.config.floor_z * ch.sig_n
 
     def _follow(self, ch: Channel, t_s: float, n_m: float, n_p: float, current_a: float) -> None:
         """An episode in progress: confirm a load change, re-judge, or clear."""
@@ -281,6 +297,7 @@ class ShaftDiagnoser:
         ch.calm_s = ch.calm_s + self._sample_gap(ch) if quiet else 0.0
         if ch.calm_s >= cfg.clear_s:
             ch.hyp = Hypothesis.HEALTHY
+            ch.frozen_s = 0.0
             ch.thrust.reset()
             ch.load.reset()
             ch.ratio_t = ch.ratio_q = 1.0

@@ -172,6 +172,7 @@ class Channel:
         self.hyp = Hypothesis.TELEMETRY_LOST
         self.since_s = 0.0  # when the current alarm episode began
         self.calm_s = 0.0  # commanded time with small residuals in an alarm
+        self.frozen_s = 0.0  # healthy: how long the speed has held while the command moved
         self.last_sample_s = -math.inf
         self.speed_m = math.nan
         self.r_t = self.r_q = math.nan
@@ -240,6 +241,7 @@ class Channel:
         self.history.clear()
         self.history.append((t_s, n, n, n))
         self.recent.clear()
+        self.frozen_s = 0.0
         self.thrust.reset()
         self.load.reset()
 

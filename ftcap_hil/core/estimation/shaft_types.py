@@ -117,6 +117,7 @@ class DiagnosisConfig:
     stall_rel: float = 0.1  # |n_m| below this share of the predicted speed: not turning
     jam_current_rel: float = 0.5  # drawn current (above idle) of the predicted: jammed
     stuck_window_s: float = 2.0
+    stuck_hold_s: float = 0.5  # frozen (held while the command moved measurably) this long
     hold_s: float = 3.0
     clear_z: float = 2.5
     clear_s: float = 1.0

@@ -165,7 +165,7 @@ def fit(traces: list[list[ResidualSample]], resolution: float) -> dict[str, floa
     current = fit_band(load, le) if np.isfinite(le).sum() > 100 else LOOSE_CURRENT
     out["current_rel"], out["current_abs"] = current
     out = {k: float(f"{v:.4g}") for k, v in out.items()}  # what is printed is what counts
-    k = DiagnosisConfig().cusum_k
+    k, floor_z = DiagnosisConfig().cusum_k, DiagnosisConfig().floor_z
     peaks: list[float] = []  # the speed test's, per thruster and run
     load_peaks: list[float] = [0.0]  # the load test's (none where no load is visible)
     for trace in traces:
@@ -184,10 +184,11 @@ def fit(traces: list[list[ResidualSample]], resolution: float) -> dict[str, floa
             peaks.append(cusum_peak(err / band, k))
             le_i = np.array([s.load_error_a for s in samples_i])
             load_i = np.array([s.load_a for s in samples_i])
-            ok = np.isfinite(le_i)
+            band = out["current_rel"] * load_i + out["current_abs"]
+            # the samples the load test takes with the fitted bands: a load floor_z of them
+            ok = np.isfinite(le_i) & (load_i >= floor_z * band)
             if ok.any():
-                band = out["current_rel"] * load_i[ok] + out["current_abs"]
-                load_peaks.append(cusum_peak(le_i[ok] / band, k))
+                load_peaks.append(cusum_peak(le_i[ok] / band[ok], k))
     out["cusum_h"] = float(f"{max(8.0, 1.5 * max(peaks)):.4g}")
     out["load_h"] = float(f"{max(8.0, 1.5 * max(load_peaks)):.4g}")
     out["peak"], out["load_peak"] = max(peaks), max(load_peaks)

@@ -50,3 +50,26 @@ def test_the_seeds_default_to_the_campaigns_tuning_seeds(calibration: ModuleType
     assert {f.label for f in todo} == {f"supply-bf{b}" for b in range(2, 7)}
     assert {f.doc["scenario"]["seed"] for f in todo} == {1001, 1002, 1003}
     assert all(f.doc["scenario"]["duration"] == 60.0 for f in todo)
+
+
+def test_the_load_threshold_rests_on_the_samples_the_load_test_takes(
+    calibration: ModuleType,
+) -> None:
+    """A shaft near standstill draws its in-flow's share and the sensor's noise, not a
+    load: a steady +8 A there (at 1-2 A of load) feeds no load test, so it sets no
+    threshold; the same +8 A where the speed draws 100 A does."""
+    from ftcap_hil.core.estimation.shaft import ResidualSample
+
+    def thruster(index: int, load_a: float, error_a: float) -> list[ResidualSample]:
+        """300 samples at 1-10 rev/s, +-2 A of noise about ``error_a`` at ``load_a``-ish."""
+        return [
+            ResidualSample(index, 0.5 * k, 1.0 + (k % 30) * 0.3, 0.004 * (-1) ** k,
+                           load_a * (1.0 + (k % 7) / 7.0), error_a + 2.0 * (-1) ** k)
+            for k in range(300)
+        ]  # fmt: skip
+
+    healthy = thruster(0, 100.0, 0.0) + thruster(1, 1.0, 0.0)
+    low = calibration.fit([healthy + thruster(2, 1.0, 8.0)], 1.0 / 60.0)
+    high = calibration.fit([healthy + thruster(2, 100.0, 8.0)], 1.0 / 60.0)
+    assert low["load_h"] == 8.0 and low["load_peak"] < 5.0
+    assert high["load_h"] > 100.0

@@ -28,10 +28,12 @@ a shaft reading 0 rpm there is dozens of bands off. Each residual feeds two one-
 CUSUMs, S <- max(0, S + |r| - k) on its own side (one sample moves S by at most 0.6 h),
 updated while the shaft should be turning measurably: the whole predicted range one way
 and ``floor_z`` bands from zero; the load's only while the speed fits (within
-``clear_z``): a load hypothesis needs a shaft turning as commanded. After a telemetry gap
-the prediction restarts from the measured speed. An alarm is S > h (``cusum_h`` for the
-speed, ``load_h`` for the load). From the alarms, the measured speed and current, one
-hypothesis per thruster (:class:`Hypothesis`) and the effectiveness its drive shows::
+``clear_z``) and the current the speed draws is ``floor_z`` bands above idle: a load
+hypothesis needs a shaft turning as commanded, under a load the sensor resolves. After a
+telemetry gap the prediction restarts from the measured speed. An alarm is S > h
+(``cusum_h`` for the speed, ``load_h`` for the load). From the alarms, the measured
+speed and current, one hypothesis per thruster (:class:`Hypothesis`) and the
+effectiveness its drive shows::
 
     no telemetry for telemetry_timeout_s        TELEMETRY_LOST  (not a thruster fault: 1)
     speed off, |n_m| ~ 0, current near idle      DRIVE_DEAD      0
@@ -175,7 +177,7 @@ class ShaftDiagnoser:
         if self.trace is not None and tested and healthy:
             self.trace.append(ResidualSample(
                 index, t_measured_s, n_p, ch.r_t * sigma_n, ch.i_pred - mdl.idle_a,
-                ch.r_q * ch.sig_i if math.isfinite(ch.r_q) else math.nan,
+                ch.r_q * ch.sig_i if ch.load_fed else math.nan,
                 sigma_n - ch.band_n, mdl.is_shaft,
             ))  # fmt: skip
 
@@ -195,8 +197,13 @@ class ShaftDiagnoser:
         # one sample moves a CUSUM by at most 0.6 h: no single reading raises an alarm
         cap = 0.6 * cfg.cusum_h + cfg.cusum_k
         ch.thrust.update(min(max(ch.r_t, -cap), cap), cfg.cusum_k)
-        fits = abs(ch.r_t) < cfg.clear_z  # the load is judged only where the speed fits
-        if math.isfinite(ch.r_q) and fits:
+        # the load is judged only where the speed fits and the load is measurable: the
+        # current the speed draws floor_z bands above idle (near standstill the in-flow's
+        # share and the sensor's noise are all there is, and a lost blade is invisible)
+        fits = abs(ch.r_t) < cfg.clear_z
+        drawn = ch.i_pred - ch.model.idle_a
+        ch.load_fed = math.isfinite(ch.r_q) and fits and drawn >= cfg.floor_z * ch.sig_i
+        if ch.load_fed:
             cap = 0.6 * cfg.load_h + cfg.cusum_k
             ch.load.update(min(max(ch.r_q, -cap), cap), cfg.cusum_k)
         if n_p:

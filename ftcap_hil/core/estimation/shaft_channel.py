@@ -173,6 +173,7 @@ class Channel:
         self.since_s = 0.0  # when the current alarm episode began
         self.calm_s = 0.0  # commanded time with small residuals in an alarm
         self.frozen_s = 0.0  # healthy: how long the speed has held while the command moved
+        self.load_fed = False  # the last sample fed the load test
         self.last_sample_s = -math.inf
         self.speed_m = math.nan
         self.r_t = self.r_q = math.nan

@@ -168,6 +168,7 @@ class FtcapCore:
                 raise ValueError(f"drives: expected {self.m} drive models, got {len(drives)}")
             self.shaft = ShaftDiagnoser(drives, self.config.diagnosis)
         self._motion_only_s = np.zeros(self.m)  # a motion-only removal held this long
+        self._silent_known = np.zeros(self.m, dtype=bool)  # judged since its drive fell silent
         self._period_s = period_s
         self._estimates = self.config.mode.estimates
         # Pure functions of their inputs, kept while those are the very same objects (a
@@ -316,7 +317,22 @@ class FtcapCore:
         """``ev`` with the drives' verdict and the diagnosis's switches (motion, dither)."""
         confirmed = self._motion_confirmed(out, verdict, elapsed_s)
         diag = self.config.diagnosis
-        return ev.with_shaft(verdict, confirmed, diag.motion, diag.dither)
+        explore = self._explore(out, verdict)
+        return ev.with_shaft(verdict, confirmed, diag.motion, diag.dither, explore)
+
+    def _explore(self, out: StageOutput, verdict: ShaftVerdict) -> BoolArray:
+        """Thrusters whose drive is silent and that the motion has not determined since the
+        drive fell silent (its delta_hat's standard deviation under the estimator's
+        ``observable_std``): they need the dither. Once determined, not again until the
+        drive has spoken and fallen silent anew, so that a drive that only lost its
+        telemetry costs the boat one spell of dither."""
+        silent = ~verdict.fresh
+        std = out.estimate.delta_std
+        limit = self.config.estimator.observable_std
+        seen = np.ones(self.m, dtype=bool) if std is None else std < limit
+        self._silent_known = silent & (self._silent_known | seen)
+        explore: BoolArray = silent & ~self._silent_known
+        return explore
 
     def _motion_confirmed(
         self, out: StageOutput, verdict: ShaftVerdict, elapsed_s: float | None

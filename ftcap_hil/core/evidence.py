@@ -48,6 +48,8 @@ class Evidence:
     motion_confirmed: BoolArray | None = None  # motion-only removals held long enough
     motion: bool = True  # False: the drives alone decide
     dither: bool = False  # dither the thrusters whose drives report fresh telemetry
+    # (m,) silent drives the motion has yet to judge: every live thruster dithers meanwhile
+    explore: BoolArray | None = None
 
     @classmethod
     def of(cls, m: int, dead: object | None = None, stalled: object | None = None) -> Evidence:
@@ -67,6 +69,7 @@ class Evidence:
         motion_confirmed: BoolArray,
         motion: bool = True,
         dither: bool = False,
+        explore: BoolArray | None = None,
     ) -> Evidence:
         """This evidence with the drives' verdict: actionable shaft losses are allocated at
         the effectiveness the drive shows (times the motion's hull factor), a stuck
@@ -74,10 +77,13 @@ class Evidence:
         drive shows nothing wrong is only advisory until ``motion_confirmed``. ``motion``
         False: the drives alone decide (the motion's estimate is reported, never used).
         ``dither`` False: no dither on a thruster whose drive reports fresh telemetry (its
-        drive judges it; probes of a thruster taken out go on)."""
+        drive judges it; probes of a thruster taken out go on), unless ``explore`` (m,) names
+        a thruster whose drive is silent and that the motion has yet to judge, not out
+        already: then every live thruster dithers."""
         return replace(
-            self, shaft=verdict, motion_confirmed=motion_confirmed, motion=motion, dither=dither
-        )
+            self, shaft=verdict, motion_confirmed=motion_confirmed, motion=motion, dither=dither,
+            explore=explore,
+        )  # fmt: skip
 
     @property
     def out(self) -> BoolArray:
@@ -176,4 +182,13 @@ def _with_shaft(
         faulty=(out.faulty if evidence.motion else np.zeros_like(act)) | act, decision=dec,
     )  # fmt: skip
     quiet_drive = v.fresh if not evidence.dither else np.zeros_like(v.fresh)
+    explore = evidence.explore
+    if evidence.motion and explore is not None:
+        out_already = evidence.out if dec is None else evidence.out | dec.removed
+        if True in (explore & ~out_already).tolist():
+            # a drive fallen silent says nothing of its thruster, so the motion must, and
+            # the dither that informs it lives in the null space of every live thruster
+            # together (one thruster alone has none): all dither, the fresh drives judging
+            # the others meanwhile
+            quiet_drive = np.zeros_like(v.fresh)
     return judged, stuck, v.alarm | advisory | quiet_drive

@@ -1,0 +1,94 @@
+"""Which thrusters the fused mode leaves out of the dither (core/evidence.py): a thruster
+whose drive reports fresh telemetry is judged by its drive and not dithered, unless a
+silent drive's thruster needs the motion's evidence: the null-space dither then runs on
+every live thruster, until the motion's recent data determine the silent one, once per
+silence (core/cycle.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ftcap_hil.core.estimation.config import Estimate
+from ftcap_hil.core.estimation.decisions import Decision
+from ftcap_hil.core.estimation.shaft_types import Hypothesis, ShaftVerdict
+from ftcap_hil.core.estimation.stages import StageOutput
+from ftcap_hil.core.evidence import Evidence, apply_evidence
+
+M = 4
+B = np.array([[1.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0], [0.3, -0.3, 0.5, -0.5]])
+HEALTHY, SILENT = Hypothesis.HEALTHY, Hypothesis.TELEMETRY_LOST
+
+
+def _verdict(fresh: list[bool]) -> ShaftVerdict:
+    ones, nan = np.ones(M), np.full(M, np.nan)
+    hyp = tuple(HEALTHY if f else SILENT for f in fresh)
+    return ShaftVerdict(
+        hyp, ones, nan, nan, np.array(fresh), np.zeros(M, dtype=bool), np.zeros(M), nan
+    )
+
+
+def _stage(observable: list[bool] | None = None, removed: list[bool] | None = None) -> StageOutput:
+    no = np.zeros(M, dtype=bool)
+    gone = np.array(removed or [False] * M)
+    dec = Decision(
+        np.where(gone, 0.0, 1.0), np.zeros(M), np.zeros(3), no, gone, gone, no,
+        np.array(observable or [True] * M),
+    )  # fmt: skip
+    std = np.where(np.array(observable or [True] * M), 0.05, 0.2)  # observable_std 0.1
+    est = Estimate(np.where(gone, 0.0, 1.0), np.zeros(3), np.zeros(M), delta_std=std)
+    return StageOutput(est, dec.delta_alloc, np.zeros(3), gone, dec)
+
+
+def _undithered(
+    fresh: list[bool], explore: list[bool] | None, removed: list[bool] | None = None,
+    dead: list[bool] | None = None, motion: bool = True,
+) -> list[bool]:  # fmt: skip
+    wanted = None if explore is None else np.array(explore)
+    ev = Evidence.of(M, dead=dead).with_shaft(
+        _verdict(fresh), np.zeros(M, dtype=bool), motion, explore=wanted
+    )
+    judged = apply_evidence(ev, _stage(removed=removed), 0.05, B)
+    assert judged.no_dither is not None
+    return judged.no_dither.tolist()
+
+
+SILENT_3 = [True, True, False, True]  # thruster 3's drive is silent
+
+
+def test_fresh_drives_judge_their_thrusters_and_are_not_dithered() -> None:
+    assert _undithered([True] * 4, None) == [True] * 4
+    assert _undithered(SILENT_3, [False] * 4) == SILENT_3
+
+
+def test_a_silent_drive_whose_thruster_the_motion_has_yet_to_judge_dithers_every_one() -> None:
+    # every live thruster dithers: one thruster alone has no null space to dither in
+    assert _undithered(SILENT_3, [False, False, True, False]) == [False] * 4
+
+
+def test_a_silent_thruster_already_out_or_known_dead_needs_no_dither() -> None:
+    explore, out = [False, False, True, False], [False, False, True, False]
+    assert _undithered(SILENT_3, explore, removed=out) == SILENT_3
+    assert _undithered(SILENT_3, explore, dead=out) == SILENT_3
+    # the drives alone decide: the motion's evidence is not asked for
+    assert _undithered(SILENT_3, explore, motion=False) == SILENT_3
+
+
+def test_the_core_asks_for_the_dither_once_per_silence() -> None:
+    """Silent and not determined (delta_hat's std over the estimator's observable_std):
+    explore; determined once: not again while silent, even when it grows again; fresh,
+    then silent anew: explore again."""
+    from ftcap_hil.config.scenario import load_scenario
+    from ftcap_hil.core.cycle import FtcapCore
+
+    sc = load_scenario("paper-4.2-ex1")
+    core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, plant=sc.plant)
+    unknown, known = [True, True, False, True], [True] * 4
+    steps = [
+        (SILENT_3, unknown, [False, False, True, False]),
+        (SILENT_3, known, [False] * 4),
+        (SILENT_3, unknown, [False] * 4),
+        ([True] * 4, unknown, [False] * 4),
+        (SILENT_3, unknown, [False, False, True, False]),
+    ]
+    for fresh, observable, wanted in steps:
+        assert core._explore(_stage(observable), _verdict(fresh)).tolist() == wanted

@@ -169,6 +169,7 @@ class FtcapCore:
             self.shaft = ShaftDiagnoser(drives, self.config.diagnosis)
         self._motion_only_s = np.zeros(self.m)  # a motion-only removal held this long
         self._silent_known = np.zeros(self.m, dtype=bool)  # judged since its drive fell silent
+        self._was_silent = np.zeros(self.m, dtype=bool)  # no fresh telemetry at the last cycle
         self._period_s = period_s
         self._estimates = self.config.mode.estimates
         # Pure functions of their inputs, kept while those are the very same objects (a
@@ -315,10 +316,22 @@ class FtcapCore:
         self, ev: Evidence, verdict: ShaftVerdict, out: StageOutput, elapsed_s: float | None
     ) -> Evidence:
         """``ev`` with the drives' verdict and the diagnosis's switches (motion, dither)."""
+        self._drives_back(verdict)
         confirmed = self._motion_confirmed(out, verdict, elapsed_s)
         diag = self.config.diagnosis
         explore = self._explore(out, verdict)
         return ev.with_shaft(verdict, confirmed, diag.motion, diag.dither, explore)
+
+    def _drives_back(self, verdict: ShaftVerdict) -> None:
+        """A drive that speaks again after a silence and shows a healthy shaft: the motion's
+        opinion of its thruster, learnt while only the motion could judge it (a power loss,
+        an intermittent connector), is dropped, so that a fault that ended is not held
+        against it (nor removed again after ``motion_removal_s`` as an advisory)."""
+        back = self._was_silent & verdict.fresh & ~verdict.alarm
+        self._was_silent = ~verdict.fresh
+        if True in back.tolist() and isinstance(self.stage, KalmanStage):
+            self.stage.forget(back)
+            self._motion_only_s = np.where(back, 0.0, self._motion_only_s)
 
     def _explore(self, out: StageOutput, verdict: ShaftVerdict) -> BoolArray:
         """Thrusters whose drive is silent and that the motion has not determined since the

@@ -92,3 +92,31 @@ def test_the_core_asks_for_the_dither_once_per_silence() -> None:
     ]
     for fresh, observable, wanted in steps:
         assert core._explore(_stage(observable), _verdict(fresh)).tolist() == wanted
+
+
+def test_a_silent_drive_that_speaks_again_healthy_drops_what_the_motion_learnt() -> None:
+    """While thruster 3's drive was silent the motion judged it dead and removed it; its
+    drive reports a healthy shaft again: the motion's opinion of it is dropped (delta 1 at
+    its prior variance, unflagged, back in the allocation), the others' kept."""
+    from ftcap_hil.config.scenario import load_scenario
+    from ftcap_hil.core.cycle import FtcapCore
+    from ftcap_hil.core.estimation.stages import KalmanStage
+
+    sc = load_scenario("paper-4.2-ex1")
+    core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, plant=sc.plant)
+    stage = core.stage
+    assert isinstance(stage, KalmanStage)
+    kf, dec = stage.filter, stage._decider
+    ks = kf._ks
+    prior = kf.P[ks + 2, ks + 2]
+    kf.z[ks : ks + 4] = [0.7, 1.0, 0.0, 1.0]
+    kf.P[ks + 2, ks + 2], kf.P[ks + 2, ks] = 1e-4, 1e-5
+    dec._faulty[:] = dec._removed[:] = [True, False, True, False]
+    core._drives_back(_verdict(SILENT_3))  # silent: nothing dropped yet
+    assert kf.z[ks + 2] == 0.0
+    core._drives_back(_verdict([True] * 4))  # it speaks again, healthy
+    assert kf.z[ks : ks + 4].tolist() == [0.7, 1.0, 1.0, 1.0]
+    assert kf.P[ks + 2, ks + 2] == prior and kf.P[ks + 2, ks] == 0.0
+    assert dec._faulty.tolist() == dec._removed.tolist() == [True, False, False, False]
+    core._drives_back(_verdict([True] * 4))  # fresh all along since: nothing more
+    assert dec._faulty.tolist() == [True, False, False, False]

@@ -96,6 +96,13 @@ class FaultDecider:
         self._eps = 1e-18 * np.eye(self._k)  # keeps the attribution's weight invertible
         self._range_min = float(np.min(self._range))
 
+    def forget(self, which: BoolArray) -> None:
+        """The thrusters ``which`` (m,) neither flagged nor removed, with no recent data (the
+        filter's :meth:`~KalmanEstimator.forget`)."""
+        self._faulty = self._faulty & ~which
+        self._removed = self._removed & ~which
+        self._info = np.where(which, 0.0, self._info)
+
     def update(self, out: FilterOutput, dt_s: float) -> Decision:
         """Decisions after one filter update of an estimation interval ``dt_s``."""
         self._info[self._head] = out.info

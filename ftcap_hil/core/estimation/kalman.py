@@ -181,6 +181,17 @@ class KalmanEstimator:
         self._started = False
         self._cusum = 0.0
 
+    def forget(self, which: BoolArray) -> None:
+        """The thrusters ``which`` (m,) back to their prior (delta 1, its prior variance, no
+        correlation with the rest): what the motion learnt of them no longer holds (their
+        drive, silent while it learnt, reports a healthy shaft again)."""
+        for i in np.flatnonzero(which).tolist():
+            j = self._ks + i
+            self.z[j] = 1.0
+            self.P[j, :] = 0.0
+            self.P[:, j] = 0.0
+            self.P[j, j] = self._theta0_var[i]
+
     def update(
         self, u: FloatArray, x_now: FloatArray, dt_s: float, x_prev: FloatArray | None = None
     ) -> FilterOutput:

@@ -208,6 +208,12 @@ class KalmanStage:
         self._decider = FaultDecider(B, u_range, config, fault_threshold, fault_clear)
         self._out = _identity(B.shape[1], B.shape[0])
 
+    def forget(self, which: BoolArray) -> None:
+        """What the motion learnt of the thrusters ``which`` (m,) dropped: their prior again,
+        unflagged, in the allocation from the next sample on."""
+        self.filter.forget(which)
+        self._decider.forget(which)
+
     def update(
         self, sample: Sample | None, u_sample: FloatArray, truth: Truth | None
     ) -> StageOutput:

@@ -165,7 +165,8 @@ def fit(traces: list[list[ResidualSample]], resolution: float) -> dict[str, floa
     current = fit_band(load, le) if np.isfinite(le).sum() > 100 else LOOSE_CURRENT
     out["current_rel"], out["current_abs"] = current
     out = {k: float(f"{v:.4g}") for k, v in out.items()}  # what is printed is what counts
-    k, floor_z = DiagnosisConfig().cusum_k, DiagnosisConfig().floor_z
+    base = DiagnosisConfig()
+    k, floor_z = base.cusum_k, base.floor_z
     peaks: list[float] = []  # the speed test's, per thruster and run
     load_peaks: list[float] = [0.0]  # the load test's (none where no load is visible)
     for trace in traces:

@@ -213,6 +213,7 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
     ok = [r for r in rows if r["status"] == "ok"]
     hours = sum(r["duration_s"] for r in ok) / 3600.0
     harm = harm_list(rows)
+    faults = fault_rows(rows)
     out = [
         f"# Campaign {info.get('name', '')}",
         "",
@@ -239,7 +240,7 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "oracle's.",
         "",
         HEADLINE_BEGIN,
-        *markdown_table(headline_rows(rows, fault_rows(rows)), HEADLINE_COLUMNS),
+        *markdown_table(headline_rows(rows, faults), HEADLINE_COLUMNS),
         HEADLINE_END,
         "",
         "## Runs per mode and fault kind",
@@ -251,7 +252,7 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "Every episode on its own: each on/off spell of an intermittent fault is a row "
         "here (the headline and the map below count the fault once per run).",
         "",
-        *markdown_table(fault_groups(fault_rows(rows)), FAULT_COLUMNS),
+        *markdown_table(fault_groups(faults), FAULT_COLUMNS),
         "",
         *_harm_section(harm, params),
         "## Where the method stops",
@@ -261,9 +262,9 @@ def summary_markdown(rows: list[Row], params: MetricParams, info: dict[str, Any]
         "scenario the healthy hours and "
         "false-alarm episodes per hour (Poisson 95 %, n episodes).",
         "",
-        *markdown_table(sweep_rows(rows, fault_rows(rows)), SWEEP_COLUMNS),
+        *markdown_table(sweep_rows(rows, faults), SWEEP_COLUMNS),
         "",
-        *_visible_section(fault_rows(rows)),
+        *_visible_section(faults),
         "## Failed runs",
         "",
         *_failed(rows),

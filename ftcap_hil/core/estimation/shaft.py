@@ -282,18 +282,22 @@ class ShaftDiagnoser:
         scale = max(abs(p) for p in preds) or 1.0
         return max(preds) - min(preds), max(speeds) - min(speeds), scale
 
-    def _flat(self, ch: Channel) -> bool:
+    @staticmethod
+    def _held(moved: float, held: float, scale: float) -> bool:
         """The speed held (within a fifth of it) while the prediction moved by more than 5 %
-        of its size over ``stuck_window_s``."""
-        moved, held, scale = self._moves(ch)
+        of its size."""
         return moved > 0.05 * scale and held < 0.2 * moved
+
+    def _flat(self, ch: Channel) -> bool:
+        """:meth:`_held` over ``stuck_window_s``."""
+        return self._held(*self._moves(ch))
 
     def _frozen(self, ch: Channel) -> bool:
         """:meth:`_flat`, and the prediction's move measurable: ``floor_z`` bands at the
         speed it runs (a healthy drive, even one lagging 1 + ``lag_uncertainty`` times its
         data sheet, follows such a move by more than half of it; a frozen shaft not at all)."""
-        moved, _, _ = self._moves(ch)
-        return self._flat(ch) and moved >= self.config.floor_z * ch.sig_n
+        moved, held, scale = self._moves(ch)
+        return self._held(moved, held, scale) and moved >= self.config.floor_z * ch.sig_n
 
     def _follow(self, ch: Channel, t_s: float, n_m: float, n_p: float, current_a: float) -> None:
         """An episode in progress: confirm a load change, re-judge, or clear."""

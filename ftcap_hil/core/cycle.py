@@ -169,7 +169,8 @@ class FtcapCore:
             self.shaft = ShaftDiagnoser(drives, self.config.diagnosis)
         self._motion_only_s = np.zeros(self.m)  # a motion-only removal held this long
         self._silent_known = np.zeros(self.m, dtype=bool)  # judged since its drive fell silent
-        self._was_silent = np.zeros(self.m, dtype=bool)  # no fresh telemetry at the last cycle
+        self._spoken = np.zeros(self.m, dtype=bool)  # its drive has reported at least once
+        self._was_silent = np.zeros(self.m, dtype=bool)  # had spoken, silent at the last cycle
         self._period_s = period_s
         self._estimates = self.config.mode.estimates
         # Pure functions of their inputs, kept while those are the very same objects (a
@@ -328,7 +329,8 @@ class FtcapCore:
         an intermittent connector), is dropped, so that a fault that ended is not held
         against it (nor removed again after ``motion_removal_s`` as an advisory)."""
         back = self._was_silent & verdict.fresh & ~verdict.alarm
-        self._was_silent = ~verdict.fresh
+        self._spoken = self._spoken | verdict.fresh
+        self._was_silent = ~verdict.fresh & self._spoken
         if True in back.tolist() and isinstance(self.stage, KalmanStage):
             self.stage.forget(back)
             self._motion_only_s = np.where(back, 0.0, self._motion_only_s)
@@ -338,8 +340,9 @@ class FtcapCore:
         drive fell silent (its delta_hat's standard deviation under the estimator's
         ``observable_std``): they need the dither. Once determined, not again until the
         drive has spoken and fallen silent anew, so that a drive that only lost its
-        telemetry costs the boat one spell of dither."""
-        silent = ~verdict.fresh
+        telemetry costs the boat one spell of dither. A drive that has not reported yet (the
+        start, before its first sample) has not fallen silent."""
+        silent = ~verdict.fresh & self._spoken
         std = out.estimate.delta_std
         limit = self.config.estimator.observable_std
         seen = np.ones(self.m, dtype=bool) if std is None else std < limit

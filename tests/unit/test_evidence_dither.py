@@ -84,6 +84,8 @@ def test_the_core_asks_for_the_dither_once_per_silence() -> None:
     core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, plant=sc.plant)
     unknown, known = [True, True, False, True], [True] * 4
     steps = [
+        (SILENT_3, unknown, [False] * 4),  # the start: thruster 3's drive has not spoken yet
+        ([True] * 4, unknown, [False] * 4),
         (SILENT_3, unknown, [False, False, True, False]),
         (SILENT_3, known, [False] * 4),
         (SILENT_3, unknown, [False] * 4),
@@ -91,6 +93,7 @@ def test_the_core_asks_for_the_dither_once_per_silence() -> None:
         (SILENT_3, unknown, [False, False, True, False]),
     ]
     for fresh, observable, wanted in steps:
+        core._drives_back(_verdict(fresh))  # as _with_drives: who has spoken, first
         assert core._explore(_stage(observable), _verdict(fresh)).tolist() == wanted
 
 
@@ -112,7 +115,10 @@ def test_a_silent_drive_that_speaks_again_healthy_drops_what_the_motion_learnt()
     kf.z[ks : ks + 4] = [0.7, 1.0, 0.0, 1.0]
     kf.P[ks + 2, ks + 2], kf.P[ks + 2, ks] = 1e-4, 1e-5
     dec._faulty[:] = dec._removed[:] = [True, False, True, False]
-    core._drives_back(_verdict(SILENT_3))  # silent: nothing dropped yet
+    core._drives_back(_verdict(SILENT_3))  # the start: 3 has not spoken, nothing dropped
+    core._drives_back(_verdict([True] * 4))
+    assert kf.z[ks + 2] == 0.0
+    core._drives_back(_verdict(SILENT_3))  # spoken, then silent: nothing dropped yet
     assert kf.z[ks + 2] == 0.0
     core._drives_back(_verdict([True] * 4))  # it speaks again, healthy
     assert kf.z[ks : ks + 4].tolist() == [0.7, 1.0, 1.0, 1.0]

@@ -118,5 +118,6 @@ def data_sheet(
             idle_a=a.idle_a,
             inflow_thrust=(1.0 - a.wake_fraction) / (a.j_thrust * d),
             inflow_torque=(1.0 - a.wake_fraction) / (a.j_torque * d),
+            speed_loop=a.drive is DriveKind.SPEED,
         ))  # fmt: skip
     return tuple(out)

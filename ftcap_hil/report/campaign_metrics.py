@@ -33,7 +33,9 @@ allocation, the effectiveness the allocator used below its dead threshold).
   frozen shaft, lost blade, a weak motor down by ``WEAK_VISIBLE`` or more); the drive's
   *verdict*: the hypothesis its diagnosis gave most often while the thruster was isolated
   in the episode; the cause is *named* when that verdict is the one the cause shows
-  (:data:`NAMED_BY`).
+  (:data:`NAMED_BY`; a jammed servo holds its deflection: named stuck). *Visible from*:
+  when the drive can first show it (the onset; a weak motor's ramp, once down by
+  ``WEAK_VISIBLE``); the visible delay: first cycle from then with i isolated, minus then.
 
 A delay that never happens is None (JSON null).
 """
@@ -61,7 +63,7 @@ DRIVE_VISIBLE = frozenset(
     {Cause.DRIVE_DEAD, Cause.JAMMED, Cause.STUCK, Cause.LOST_BLADE, Cause.WEAK_MOTOR}
 )
 WEAK_VISIBLE = 0.3
-#: The drive's verdict that names each cause.
+#: The drive's verdict that names each cause (on a servo, :data:`NAMED_ON_SERVO` first).
 NAMED_BY: dict[Cause, Hypothesis] = {
     Cause.DRIVE_DEAD: Hypothesis.DRIVE_DEAD,
     Cause.JAMMED: Hypothesis.JAMMED,
@@ -75,6 +77,9 @@ NAMED_BY: dict[Cause, Hypothesis] = {
     Cause.VENTILATION: Hypothesis.VENTILATION,
     Cause.HULL_LOSS: Hypothesis.HEALTHY,
 }
+#: A jammed servo holds its deflection (sim/thrusters.py), and its force with it: the
+#: verdict that says so, and gives the allocator the held force, is a stuck one.
+NAMED_ON_SERVO: dict[Cause, Hypothesis] = {Cause.JAMMED: Hypothesis.STUCK}
 
 
 @dataclass(frozen=True)
@@ -261,6 +266,15 @@ def _cause(r: _Run, ep: Episode) -> dict[str, Any]:
     visible = cause in DRIVE_VISIBLE and (
         cause is not Cause.WEAK_MOTOR or delta_min <= 1.0 - WEAK_VISIBLE
     )
+    # from when the drive can show it: a weak motor (a ramp) once down by WEAK_VISIBLE
+    seen = np.flatnonzero(r.delta[a:b, i] <= 1.0 - WEAK_VISIBLE) if visible else None
+    if seen is not None and cause is not Cause.WEAK_MOTOR:
+        seen = np.zeros(1, dtype=np.intp)
+    v0 = None if seen is None or not seen.size else a + int(seen[0])
+    drives = r.rec.scenario.drives
+    named = NAMED_BY.get(cause)
+    if drives is not None and not drives[i].is_shaft:
+        named = NAMED_ON_SERVO.get(cause, named)
     verdict = None
     if r.drive is not None:
         codes = r.drive[a:b, i][r.isolated[a:b, i]]
@@ -271,7 +285,9 @@ def _cause(r: _Run, ep: Episode) -> dict[str, Any]:
         "cause": cause.value,
         "drive_visible": visible,
         "drive_verdict": None if verdict is None else verdict.value,
-        "cause_named": None if verdict is None else verdict is NAMED_BY.get(cause),
+        "cause_named": None if verdict is None else verdict is named,
+        "visible_s": None if v0 is None else float(r.t[v0] - r.t[a]),
+        "visible_delay_s": None if v0 is None else r.delay(r.isolated[:, i], v0, b),
     }
 
 

@@ -283,7 +283,8 @@ def _visible_section(faults: list[Row]) -> list[str]:
         "",
         "The faults a drive's own telemetry shows (drive dead, jammed, frozen shaft, lost "
         "blade, a weak motor down by 30 % or more), one per thruster and run: isolated "
-        "within 2 s, within 5 s and never, and the share isolated with the drive's verdict "
+        "within 2 s, within 5 s (from when the drive could first show it: a weak motor's "
+        "ramp once down by 30 %) and never, and the share isolated with the drive's verdict "
         "naming the cause (Wilson 95 %, n faults); per scenario, then per cause.",
         "",
         *markdown_table(rows, columns),

@@ -23,8 +23,8 @@ Row = dict[str, Any]
 WITHIN_S = (5.0, 30.0)
 
 
-def _delay(f: Row) -> float:
-    d = f.get("isolation_delay_s")
+def _delay(f: Row, key: str = "isolation_delay_s") -> float:
+    d = f.get(key)
     return math.inf if d is None else float(d)
 
 
@@ -45,9 +45,12 @@ def faults_per_run(faults: list[Row]) -> list[Row]:
         first = min(g, key=lambda f: float(f["onset_s"]))
         t0 = float(first["onset_s"])
         isolated = min(float(f["onset_s"]) + _delay(f) for f in g)
+        delay = None if math.isinf(isolated) else isolated - t0
         out.append({
             **first, "spells": len(g), "detectable": any(f["detectable"] for f in g),
-            "isolation_delay_s": None if math.isinf(isolated) else isolated - t0,
+            "isolation_delay_s": delay,
+            # an intermittent fault's cause shows from its first onset (dead, power lost)
+            "visible_delay_s": delay if first.get("drive_visible") else None,
         })  # fmt: skip
     return out
 
@@ -78,7 +81,8 @@ VISIBLE_WITHIN_S = (2.0, 5.0)  # the targets: CyberShip II within 2 s, the suppl
 def drive_visible_rows(faults: list[Row], by: str) -> list[Row]:
     """The faults a drive's telemetry shows by itself (``drive_visible``; per run:
     :func:`faults_per_run`), per mode and ``by`` (``scenario`` or ``cause``): isolated
-    within 2 s, 5 s, never, and the share whose isolation the drive's verdict named right
+    within 2 s, 5 s (from when the drive could first show it: ``visible_delay_s``), never,
+    and the share whose isolation the drive's verdict named right
     (``cause_named``) among all of them; estimating modes only."""
     groups: dict[tuple[str, str], list[Row]] = defaultdict(list)
     order: dict[str, int] = {}
@@ -89,7 +93,7 @@ def drive_visible_rows(faults: list[Row], by: str) -> list[Row]:
     out = []
     for (variant, key), g in sorted(groups.items(), key=lambda kv: (kv[0][0], order[kv[0][1]])):
         row: Row = {"mode": variant, by: key, "faults": len(g)}
-        _shares(row, [_delay(f) for f in g], VISIBLE_WITHIN_S)
+        _shares(row, [_delay(f, "visible_delay_s") for f in g], VISIBLE_WITHIN_S)
         put_interval(row, "named", wilson_share(sum(bool(f.get("cause_named")) for f in g), len(g)))
         out.append(row)
     return out

@@ -16,7 +16,7 @@ import pytest
 
 from ftcap_hil.config.campaign import HarmBasis, MetricParams
 from ftcap_hil.config.scenario import load_scenario
-from ftcap_hil.core.estimation.shaft_types import HYPOTHESIS_CODES, Hypothesis
+from ftcap_hil.core.estimation.shaft_types import HYPOTHESIS_CODES, DriveModel, Hypothesis
 from ftcap_hil.core.faults import Cause, FaultEvent, FaultSchedule
 from ftcap_hil.core.scenario import Scenario
 from ftcap_hil.core.status import Mode
@@ -453,12 +453,16 @@ def test_the_oracle_on_a_real_run_detects_and_isolates_at_once() -> None:
     assert out["false_alarms"] == 0 and out["deviation_max"] > 0.0
 
 
-def _cause_row(cause: Cause, delta: float, verdict: Hypothesis | None) -> dict[str, Any]:
-    """Thruster 2 faulty from 10 s with ``cause`` in the schedule, isolated from 11 s on
-    with ``verdict`` as its drive's hypothesis (None: no diagnosis, code 0)."""
+def _cause_row(
+    cause: Cause, delta: float, verdict: Hypothesis | None, servo: bool = False,
+) -> dict[str, Any]:  # fmt: skip
+    """Thruster 2 (a servo if ``servo``) faulty from 10 s with ``cause`` in the schedule,
+    isolated from 11 s on with ``verdict`` as its drive's hypothesis (None: no diagnosis,
+    code 0)."""
     rec = Synthetic(40.0)
     event = FaultEvent(10.0, math.inf, 1, np.array(delta), None, cause=cause)
-    rec.sc = dataclasses.replace(rec.sc, faults=FaultSchedule(4, (event,)))
+    drives = tuple(DriveModel(1.0, 0.1, is_shaft=not (servo and i == 1)) for i in range(4))
+    rec.sc = dataclasses.replace(rec.sc, faults=FaultSchedule(4, (event,)), drives=drives)
     rec.set("delta_2", 10.0, math.inf, delta)
     rec.set("faulty_2", 11.0, math.inf, 1.0)
     if verdict is not None:
@@ -482,6 +486,29 @@ def test_a_fault_row_names_its_cause_what_the_drive_can_show_and_what_it_said() 
     assert _cause_row(Cause.WEAK_MOTOR, 0.7, Hypothesis.WEAK)["drive_visible"]
     row = _cause_row(Cause.LOST_BLADE, 0.5, None)  # no diagnosis: no verdict
     assert (row["drive_verdict"], row["cause_named"]) == (None, None)
+    # a jammed servo holds its deflection and its force: a stuck verdict names it
+    assert _cause_row(Cause.JAMMED, 0.0, Hypothesis.STUCK, servo=True)["cause_named"] is True
+    assert _cause_row(Cause.JAMMED, 0.0, Hypothesis.STUCK)["cause_named"] is False
+    assert _cause_row(Cause.JAMMED, 0.0, Hypothesis.JAMMED, servo=True)["cause_named"] is False
+
+
+def test_a_weak_motor_ramp_is_timed_from_when_its_drive_can_show_it() -> None:
+    """A weak motor at 0.8 from 10 s (not yet drive-visible), 0.6 from 20 s, isolated from
+    21 s: visible from 10 s after the onset, isolated 1 s after that; a dead drive is
+    visible from its onset."""
+    rec = Synthetic(40.0)
+    event = FaultEvent(10.0, math.inf, 1, np.array(0.6), None, cause=Cause.WEAK_MOTOR)
+    rec.sc = dataclasses.replace(rec.sc, faults=FaultSchedule(4, (event,)))
+    rec.set("delta_2", 10.0, 20.0, 0.8)
+    rec.set("delta_2", 20.0, math.inf, 0.6)
+    rec.set("faulty_2", 21.0, math.inf, 1.0)
+    (row,) = run_metrics(rec.record(), None, PARAMS)["faults"]
+    assert row["drive_visible"] and row["visible_s"] == pytest.approx(10.0)
+    assert row["visible_delay_s"] == pytest.approx(1.0)
+    assert row["isolation_delay_s"] == pytest.approx(11.0)
+    row = _cause_row(Cause.DRIVE_DEAD, 0.0, Hypothesis.DRIVE_DEAD)
+    assert row["visible_s"] == 0.0 and row["visible_delay_s"] == pytest.approx(1.0)
+    assert _cause_row(Cause.POWER_LOST, 0.0, None)["visible_delay_s"] is None
 
 
 def test_the_drive_visible_table_counts_a_run_once_and_its_named_causes() -> None:
@@ -490,8 +517,8 @@ def test_the_drive_visible_table_counts_a_run_once_and_its_named_causes() -> Non
     def fault(key: str, cause: str, delay: float | None, named: bool | None) -> dict[str, Any]:
         return {"key": key, "thruster": 1, "mode": "ftcap", "variant": "ftcap",
                 "scenario": "s", "cause": cause, "onset_s": 10.0, "detectable": True,
-                "drive_visible": cause != "power-lost", "isolation_delay_s": delay,
-                "cause_named": named}  # fmt: skip
+                "drive_visible": cause != "power-lost", "isolation_delay_s": 99.0,
+                "visible_delay_s": delay, "cause_named": named}  # fmt: skip
 
     rows = drive_visible_rows(
         [fault("a", "jammed", 1.0, True), fault("b", "jammed", 3.0, False),

@@ -37,7 +37,7 @@ effectiveness its drive shows::
 
     no telemetry for telemetry_timeout_s        TELEMETRY_LOST  (not a thruster fault: 1)
     speed off, |n_m| ~ 0, current near idle      DRIVE_DEAD      0
-    speed off, |n_m| ~ 0, current drawn          JAMMED          0
+    speed off, |n_m| ~ 0, current drawn          JAMMED          0  (the episode's mean current)
     speed flat while the command moves           STUCK           0, its held force k_T n_m|n_m|
       (measurably: floor_z bands, for stuck_hold_s; or after a speed alarm)
     speed low, load consistent                   WEAK            (n_m / n_p)^2
@@ -189,6 +189,7 @@ class ShaftDiagnoser:
         cfg = self.config
         if ch.hyp is Hypothesis.TELEMETRY_LOST:
             ch.hyp = Hypothesis.HEALTHY
+            ch.stall_k, ch.stall_excess, ch.stall_drawn = 0, 0.0, 0.0
         ch.recent.append((t_s, n_m, n_p))
         while ch.recent and ch.recent[0][0] < t_s - cfg.stuck_window_s:
             ch.recent.popleft()
@@ -258,18 +259,29 @@ class ShaftDiagnoser:
         whatever else it shows; then a speed that holds while the command moves; then weak."""
         cfg, mdl = self.config, ch.model
         if abs(n_m) < cfg.stall_rel * abs(n_p):
-            if not mdl.is_shaft:
-                return Hypothesis.DRIVE_DEAD
-            # drawing current: a share of what the commanded speed draws, and measurably
-            # (floor_z bands) above idle: at 1 % of the rating that share is in the noise
-            drawn = ch.current_at(n_p) - mdl.idle_a
-            least = max(cfg.jam_current_rel * drawn, cfg.floor_z * cfg.current_abs)
-            if math.isfinite(current_a) and current_a - mdl.idle_a > least:
-                return Hypothesis.JAMMED
-            return Hypothesis.DRIVE_DEAD
+            return self._stalled(ch, n_p, current_a)
         if self._flat(ch):
             return Hypothesis.STUCK
         return Hypothesis.WEAK
+
+    def _stalled(self, ch: Channel, n_p: float, current_a: float) -> Hypothesis:
+        """A shaft not turning under command: jammed if it draws current, a share of what the
+        commanded speed draws and measurably above idle (floor_z bands of the episode's mean,
+        which averages the reading's noise down by up to half: not its drift), else dead."""
+        cfg, mdl = self.config, ch.model
+        if not mdl.is_shaft:
+            return Hypothesis.DRIVE_DEAD
+        if math.isfinite(current_a):
+            ch.stall_k += 1
+            ch.stall_excess += current_a - mdl.idle_a
+            ch.stall_drawn += ch.current_at(n_p) - mdl.idle_a
+        if not ch.stall_k:
+            return Hypothesis.DRIVE_DEAD
+        k = ch.stall_k
+        noise = cfg.floor_z * cfg.current_abs / math.sqrt(min(k, 4))
+        if ch.stall_excess / k > max(cfg.jam_current_rel * ch.stall_drawn / k, noise):
+            return Hypothesis.JAMMED
+        return Hypothesis.DRIVE_DEAD
 
     @staticmethod
     def _moves(ch: Channel) -> tuple[float, float, float]:
@@ -309,6 +321,7 @@ class ShaftDiagnoser:
         if ch.calm_s >= cfg.clear_s:
             ch.hyp = Hypothesis.HEALTHY
             ch.frozen_s = 0.0
+            ch.stall_k, ch.stall_excess, ch.stall_drawn = 0, 0.0, 0.0
             ch.thrust.reset()
             ch.load.reset()
             ch.ratio_t = ch.ratio_q = 1.0
@@ -319,6 +332,9 @@ class ShaftDiagnoser:
                 ch.hyp = Hypothesis.LOAD_LOSS
             elif ch.load.high > h_load:
                 ch.hyp = Hypothesis.LOAD_GAIN
+        elif ch.hyp in (Hypothesis.DRIVE_DEAD, Hypothesis.JAMMED):
+            if ch.model.is_shaft and abs(n_m) < cfg.stall_rel * abs(n_p):
+                ch.hyp = self._stalled(ch, n_p, current_a)  # the current's mean, updated
         elif ch.hyp in (Hypothesis.WEAK, Hypothesis.VENTILATION, *LOAD):
             if ch.thrust.high > h and not ch.thrust.low > h and not self._flat(ch):
                 ch.thrust.high = 0.0  # more thrust than asked, following the command

@@ -98,7 +98,9 @@ class SpeedMap:
     n_ref + V_a / (2 J_Q D) in either direction, so a current or the hull's own motion
     shifts its speed by an amount that does not scale with it. The scales are constants of
     the drive, learnt once; the offset walks by its prior's size over ``cal_tau_s``, as the
-    in-flow does. Each sample teaches only what the drive's lag cannot explain (the error
+    in-flow does. A drive closing a speed loop holds its speed whatever the in-flow: its map
+    has no offset (an offset free to walk there learns a weak motor's deficit at the speed
+    a DP thruster holds, a few per cent of the full speed, as if it were in-flow). Each sample teaches only what the drive's lag cannot explain (the error
     outside the prediction's range): a reversal in progress says nothing about the scales.
     Innovations are clipped to ``clear_z`` of their spread, so a fault is learnt no faster
     than the coefficients may walk. ``spread(x)`` is the map's own remaining uncertainty
@@ -106,11 +108,14 @@ class SpeedMap:
     position loop knows no in-flow and its travel no data-sheet scale: its map does not
     learn (the identity, no spread)."""
 
-    def __init__(self, cfg: DiagnosisConfig, n_full: float, learns: bool = True) -> None:
+    def __init__(
+        self, cfg: DiagnosisConfig, n_full: float, learns: bool = True, offset: bool = True,
+    ) -> None:  # fmt: skip
         self.cfg = cfg
         self.n_full = max(n_full, 1e-12)
         self.theta = np.array([1.0, 1.0, 0.0])
-        prior = [cfg.cal_limit**2, cfg.cal_limit**2, (0.02 * self.n_full) ** 2]
+        inflow = 0.02 * self.n_full if offset else 0.0
+        prior = [cfg.cal_limit**2, cfg.cal_limit**2, inflow**2]
         self._prior = np.array(prior if learns else [0.0, 0.0, 0.0])
         self.P = np.diag(self._prior)
         self.learns = learns
@@ -187,7 +192,8 @@ class Channel:
         self.i_m = self.i_pred = 0.0  # last current: measured, predicted (A)
         self.seen = 0  # commanded samples (the first cal_samples commission the model)
         n_full = abs(self.reference(model.full_force_n))
-        self.speed_map = SpeedMap(cfg, n_full, model.is_shaft)  # true against data sheet
+        # true against data sheet
+        self.speed_map = SpeedMap(cfg, n_full, model.is_shaft, offset=not model.speed_loop)
         if model.is_shaft:  # the band: bands_rel |n| + bands_res x the telemetry's resolution
             self.bands = (cfg.band_rel, cfg.band_res * cfg.speed_resolution)
         else:
@@ -201,6 +207,9 @@ class Channel:
         )
         self.recent: deque[tuple[float, float, float]] = deque()  # (t, n_m, n_p) for stuck
         self.thrust_sum, self.thrust_count = 0.0, 0  # implied thrust since the last take
+        # a stalled episode's current evidence: samples, sums of the current above idle and
+        # of what the predicted speed would draw (jammed or dead, judged on their means)
+        self.stall_k, self.stall_excess, self.stall_drawn = 0, 0.0, 0.0
 
     # --- prediction -------------------------------------------------------------------
 

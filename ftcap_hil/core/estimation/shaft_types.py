@@ -47,7 +47,7 @@ LOAD = frozenset({Hypothesis.LOAD_LOSS, Hypothesis.LOAD_GAIN})
 class DriveModel:
     """One actuator as its data sheets give it. A shaft: ``k_thrust`` N/(rev/s)^2,
     ``k_torque`` N m/(rev/s)^2, ``watts_per_amp`` = efficiency x voltage, ``inflow_*`` =
-    (1 - w) / (J_0 D) (0: in-flow not modelled); a servo (``is_shaft`` False): only
+    (1 - w) / (J_0 D) (0: in-flow not modelled), ``speed_loop`` the drive's kind; a servo (``is_shaft`` False): only
     ``full_force_n`` and ``time_constant_s`` matter."""
 
     full_force_n: float
@@ -59,6 +59,10 @@ class DriveModel:
     idle_a: float = 0.0
     inflow_thrust: float = 0.0
     inflow_torque: float = 0.0
+    # the drive closes a speed loop (a frequency converter, an ESC in rpm mode): its speed
+    # follows the reference whatever the in-flow; False: a torque (duty-cycle) drive, whose
+    # speed the in-flow shifts
+    speed_loop: bool = False
 
     def __post_init__(self) -> None:
         for name in ("full_force_n", "k_thrust", "watts_per_amp"):

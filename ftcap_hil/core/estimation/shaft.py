@@ -257,8 +257,7 @@ class ShaftDiagnoser:
     def _thrust_cause(self, ch: Channel, n_m: float, n_p: float, current_a: float) -> Hypothesis:
         """In physical order: a shaft that does not turn under command is dead or jammed
         whatever else it shows; then a speed that holds while the command moves; then weak."""
-        cfg, mdl = self.config, ch.model
-        if abs(n_m) < cfg.stall_rel * abs(n_p):
+        if abs(n_m) < self.config.stall_rel * abs(n_p):
             return self._stalled(ch, n_p, current_a)
         if self._flat(ch):
             return Hypothesis.STUCK

@@ -100,8 +100,9 @@ class SpeedMap:
     the drive, learnt once; the offset walks by its prior's size over ``cal_tau_s``, as the
     in-flow does. A drive closing a speed loop holds its speed whatever the in-flow: its map
     has no offset (an offset free to walk there learns a weak motor's deficit at the speed
-    a DP thruster holds, a few per cent of the full speed, as if it were in-flow). Each sample teaches only what the drive's lag cannot explain (the error
-    outside the prediction's range): a reversal in progress says nothing about the scales.
+    a DP thruster holds, a few per cent of the full speed, as if it were in-flow). Each
+    sample teaches only what the drive's lag cannot explain (the error outside the
+    prediction's range): a reversal in progress says nothing about the scales.
     Innovations are clipped to ``clear_z`` of their spread, so a fault is learnt no faster
     than the coefficients may walk. ``spread(x)`` is the map's own remaining uncertainty
     there: large in a direction or at a speed it has not yet been calibrated on. A servo's

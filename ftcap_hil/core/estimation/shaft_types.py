@@ -47,8 +47,8 @@ LOAD = frozenset({Hypothesis.LOAD_LOSS, Hypothesis.LOAD_GAIN})
 class DriveModel:
     """One actuator as its data sheets give it. A shaft: ``k_thrust`` N/(rev/s)^2,
     ``k_torque`` N m/(rev/s)^2, ``watts_per_amp`` = efficiency x voltage, ``inflow_*`` =
-    (1 - w) / (J_0 D) (0: in-flow not modelled), ``speed_loop`` the drive's kind; a servo (``is_shaft`` False): only
-    ``full_force_n`` and ``time_constant_s`` matter."""
+    (1 - w) / (J_0 D) (0: in-flow not modelled), ``speed_loop`` the drive's kind; a servo
+    (``is_shaft`` False): only ``full_force_n`` and ``time_constant_s`` matter."""
 
     full_force_n: float
     time_constant_s: float

@@ -53,8 +53,10 @@ def allocator_cycling(config: str, vessel: str, gap_s: float = 0.6) -> tuple[boo
     path = Path(config)
     if not path.exists():  # as the allocator's zenoh.config: a file, else a shipped name
         path = shipped_config_path(config.removesuffix(".json5"))
-    # Fail fast if the router is down (the clients' files wait 10 s for it at start-up).
-    conf = load_config(path, ["connect/timeout_ms:2000"])
+    # Fail fast if the router is down (the clients' files wait 10 s for it at start-up). The
+    # compose network's router is plain tcp (never published), as the allocator's
+    # zenoh.allow_unauthenticated says: this probe only reads the status.
+    conf = load_config(path, ["connect/timeout_ms:2000"], allow_unauthenticated=True)
     try:
         link = ZenohGcsLink(vessel, conf)
     except ZenohLinkError as e:

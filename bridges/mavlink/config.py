@@ -37,7 +37,9 @@ Security (per endpoint, all off or loopback by default): ``key_file`` turns on M
 signing (:mod:`bridges.mavlink.signing`): unsigned frames are then refused; MAVLink 1
 frames are always refused; ``authorized_systems`` lists the system ids whose setpoints,
 parameter requests and commands are obeyed (default: the ground station, 255); a bind on
-all interfaces (0.0.0.0, ::) is refused unless ``bind_all_interfaces`` is true.
+all interfaces (0.0.0.0, ::) is refused unless ``bind_all_interfaces`` is true; a link that
+reaches beyond loopback (:func:`exposure`) needs ``key_file`` (the daemon's and the vessel's
+start refuse it otherwise, unless ``allow_unauthenticated``: ftcap_hil/config/bridges.py).
 
 Protocol: MAVLink 2 only, with the ftcap dialect (common.xml + WRENCH_SETPOINT,
 FTCAP_STATUS) from :mod:`bridges.mavlink.dialect`, set explicitly on every connection.
@@ -45,6 +47,7 @@ FTCAP_STATUS) from :mod:`bridges.mavlink.dialect`, set explicitly on every conne
 
 from __future__ import annotations
 
+import ipaddress
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -88,6 +91,34 @@ def bind_host(connection: str) -> str | None:
     rest = connection.split(":", 1)[1]
     host = rest.rpartition(":")[0]
     return host
+
+
+_NETWORK = ("udpin", "udp", "udpout", "udpbcast", "tcp", "tcpin")
+
+
+def is_loopback_host(host: str) -> bool:
+    """``host`` is this machine's loopback: 127.0.0.0/8, ::1 or ``localhost``."""
+    name = host.strip("[]").split("%", 1)[0]
+    if name == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(name).is_loopback
+    except ValueError:  # another host name: resolved elsewhere, not known to be loopback
+        return False
+
+
+def exposure(endpoint: MavlinkEndpoint) -> str | None:
+    """Why the link reaches beyond this machine's loopback (the setting and its value): a
+    network connection bound or aimed elsewhere, a peer or relay inbox elsewhere; None if it
+    does not. A serial device is a wire, not a network: None."""
+    scheme, sep, rest = endpoint.connection.partition(":")
+    if sep and scheme in _NETWORK and not is_loopback_host(rest.rpartition(":")[0]):
+        return f"connection = {endpoint.connection!r}"
+    for key in ("peers", "relay"):
+        for value in getattr(endpoint, key):
+            if not is_loopback_host(parse_host_port(key, value)[0]):
+                return f"{key} contains {value!r}"
+    return None
 
 
 @dataclass(frozen=True)

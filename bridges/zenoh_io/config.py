@@ -10,7 +10,10 @@ Network policy enforced by :func:`check_settings` (the start-up check of every s
 * no endpoint in the effective ``listen/endpoints`` may bind all interfaces
   (``0.0.0.0``, ``[::]`` or an empty host): listen on ``127.0.0.1`` or a named interface address;
 * a router must listen somewhere, and a client must have a ``connect/endpoints`` entry,
-  since with scouting off nothing else would find the peer.
+  since with scouting off nothing else would find the peer;
+* an endpoint beyond loopback needs ``tls/`` or ``quic/`` with mutual TLS, and a router
+  access control denying by default, unless the caller allows it unauthenticated
+  (``[zenoh] allow_unauthenticated``).
 
 Unknown keys: zenoh itself refuses them, in a file (``Config.from_file``, serde's
 ``unknown field `x`, expected one of ...`` at every level except the free-form ``plugins``
@@ -46,7 +49,11 @@ CHECKED_KEYS = (
     "listen/endpoints",
     "connect/endpoints",
     "scouting/multicast/enabled",
+    "transport/link/tls/enable_mtls",
+    "access_control/enabled",
+    "access_control/default_permission",
 )
+AUTHENTICATED_PROTOCOLS = ("tls", "quic")  # with mutual TLS: both ends show a certificate
 
 
 class ZenohConfigError(ConfigError):
@@ -134,10 +141,49 @@ def binds_all_interfaces(locator: str) -> bool:
         return False
 
 
-def check_settings(values: Mapping[str, Any], source: str = "zenoh config") -> ZenohRole:
+def is_loopback(locator: str) -> bool:
+    """The locator stays on this machine: a loopback address, ``localhost`` or no host at
+    all (a unix socket)."""
+    host = endpoint_host(locator)
+    if host is None:
+        return True
+    name = host.split("%", 1)[0]
+    if name == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(name).is_loopback
+    except ValueError:  # another host name: not known to stay here
+        return False
+
+
+def unauthenticated_exposure(values: Mapping[str, Any], role: ZenohRole) -> str | None:
+    """The first endpoint beyond loopback that does not authenticate who is at its other
+    end (``KEY contains LOCATOR``), None if there is none. Authenticated: a ``tls/`` or
+    ``quic/`` locator with mutual TLS (``transport/link/tls/enable_mtls``), and on a router
+    access control denying by default (any certified client could put on any key else)."""
+    mtls = values.get("transport/link/tls/enable_mtls") is True
+    acl = values.get("access_control/enabled") is True and (
+        values.get("access_control/default_permission") == "deny"
+    )
+    for name in ("listen/endpoints", "connect/endpoints"):
+        key, locators = _for_mode(values.get(name), name, role)
+        for locator in locators:
+            if is_loopback(locator):
+                continue
+            secured = locator.split("/", 1)[0] in AUTHENTICATED_PROTOCOLS and mtls
+            if not (secured and (acl or role is not ZenohRole.ROUTER)):
+                return f"{key} contains {locator!r}"
+    return None
+
+
+def check_settings(
+    values: Mapping[str, Any], source: str = "zenoh config", allow_unauthenticated: bool = False,
+) -> ZenohRole:  # fmt: skip
     """Refuse a configuration that breaks the network policy; return the session role.
 
     ``values`` maps each key of :data:`CHECKED_KEYS` to its decoded JSON value (None = unset).
+    An endpoint beyond loopback without mutual TLS and access control is refused unless
+    ``allow_unauthenticated`` (:func:`unauthenticated_exposure`).
     """
     role = _role(values.get("mode") or ZenohRole.PEER.value, f"{source}: mode")
     multicast = values.get("scouting/multicast/enabled")
@@ -161,6 +207,14 @@ def check_settings(values: Mapping[str, Any], source: str = "zenoh config") -> Z
         raise ZenohConfigError(
             f"{source}: {connect_key} is empty; with multicast scouting off a client needs "
             "the router's endpoint"
+        )
+    exposed = unauthenticated_exposure(values, role)
+    if exposed is not None and not allow_unauthenticated:
+        raise ZenohConfigError(
+            f"{source}: {exposed}, beyond loopback without mutual TLS and access control: "
+            "anyone on that network could put setpoints or odometry. Use the TLS configs "
+            "(docs/transport-security.md), or set [zenoh] allow_unauthenticated = true to "
+            "accept that"
         )
     return role
 

@@ -39,6 +39,7 @@ from bridges.zenoh_io.config import (
     parse_override,
     role_settings,
     shipped_config_path,
+    unauthenticated_exposure,
 )
 from bridges.zenoh_io.ros2.endpoints import (
     Ros2Endpoint,
@@ -74,9 +75,21 @@ def apply_overrides(conf: zenoh.Config, overrides: Sequence[str] | Mapping[str, 
             raise ZenohConfigError(describe_override_error(key, value, str(e), _defaults())) from e
 
 
-def validate_config(conf: zenoh.Config, source: str = "zenoh config") -> ZenohRole:
-    """Apply :func:`bridges.zenoh_io.config.check_settings` to a zenoh.Config; return its role."""
-    return check_settings({key: _get_json(conf, key) for key in CHECKED_KEYS}, source)
+def validate_config(
+    conf: zenoh.Config, source: str = "zenoh config", allow_unauthenticated: bool = False,
+) -> ZenohRole:  # fmt: skip
+    """Apply :func:`bridges.zenoh_io.config.check_settings` to a zenoh.Config; return its
+    role. An unauthenticated endpoint beyond loopback that ``allow_unauthenticated`` lets
+    through is logged as a warning."""
+    values = {key: _get_json(conf, key) for key in CHECKED_KEYS}
+    role = check_settings(values, source, allow_unauthenticated)
+    exposed = unauthenticated_exposure(values, role)
+    if exposed is not None:
+        log.warning(
+            "%s: %s, beyond loopback without authentication (allow_unauthenticated = true): "
+            "anyone on that network can put setpoints or odometry", source, exposed,
+        )  # fmt: skip
+    return role
 
 
 def make_config(
@@ -93,15 +106,35 @@ def make_config(
     return conf
 
 
-def load_config(path: str | Path, overrides: Sequence[str] = ()) -> zenoh.Config:
-    """Load a JSON5 file, apply ``KEY:VALUE`` overrides, check it; ZenohConfigError if bad."""
+def load_config(
+    path: str | Path, overrides: Sequence[str] = (), allow_unauthenticated: bool = False,
+) -> zenoh.Config:  # fmt: skip
+    """Load a JSON5 file, apply ``KEY:VALUE`` overrides, check it (``allow_unauthenticated``:
+    :func:`validate_config`); ZenohConfigError if bad."""
+    conf = _read(path, overrides)
+    validate_config(conf, f"zenoh config {path}", allow_unauthenticated)
+    return conf
+
+
+def check_config_file(
+    path: str | Path,
+    overrides: Sequence[str] = (),
+    allow_unauthenticated: bool = False,
+) -> None:
+    """:func:`load_config`'s checks alone, nothing logged: a configuration reader's, so that
+    a refused file stops the start before any port is opened."""
+    conf = _read(path, overrides)
+    values = {key: _get_json(conf, key) for key in CHECKED_KEYS}
+    check_settings(values, f"zenoh config {path}", allow_unauthenticated)
+
+
+def _read(path: str | Path, overrides: Sequence[str]) -> zenoh.Config:
     try:
         conf = zenoh.Config.from_file(str(path))
     except zenoh.ZError as e:
         message = describe_file_error(f"zenoh config file {path}", str(e), _defaults())
         raise ZenohConfigError(message) from e
     apply_overrides(conf, overrides)
-    validate_config(conf, f"zenoh config {path}")
     return conf
 
 

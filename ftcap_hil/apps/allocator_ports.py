@@ -11,6 +11,7 @@ and closes, newest first, when it closes.
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 from collections.abc import Callable
 from typing import Any, Protocol
@@ -26,6 +27,8 @@ from ftcap_hil.ports.mailbox import EventQueue
 from ftcap_hil.runtime.command_log import CommandLog, LoggedSink
 from ftcap_hil.runtime.daemon import Ports
 from ftcap_hil.runtime.telemetry_guard import OdometryMailbox
+
+log = logging.getLogger(__name__)
 
 
 class AllocatorSettings(Protocol):
@@ -158,6 +161,8 @@ def open_mavlink(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Por
     from bridges.mavlink.allocator_params import AllocatorTunables, allocator_param_specs
     from bridges.mavlink.status import MavlinkStatusSink
 
+    if mav_cfg.warning is not None:
+        log.warning("%s", mav_cfg.warning)
     d = cfg.daemon
     odometry = OdometryMailbox("mavlink.odometry")
     link = stack.enter_context(
@@ -202,7 +207,7 @@ def open_zenoh(cfg: AllocatorSettings, stack: contextlib.ExitStack, ports: Ports
     from bridges.zenoh_io.ros2.endpoints import Ros2Settings
     from bridges.zenoh_io.status import ZenohStatusSink
 
-    conf = zenoh_link.load_config(z_cfg.config, list(z_cfg.overrides))
+    conf = zenoh_link.load_config(z_cfg.config, list(z_cfg.overrides), z_cfg.allow_unauthenticated)
     ros2 = Ros2Settings(z_cfg.domain_id, z_cfg.namespace) if z_cfg.ros2 else None
     zl = stack.enter_context(
         zenoh_link.ZenohAllocatorLink(

@@ -10,6 +10,7 @@ import the networking stacks.
 from __future__ import annotations
 
 import contextlib
+import logging
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,8 @@ from ftcap_hil.core.effectiveness.geometry import ThrusterSet
 from ftcap_hil.core.errors import ConfigError, PortError
 from ftcap_hil.core.messages import BoolArray, EscStatus, FaultInjection, Odometry, ThrusterCommand
 from ftcap_hil.ports.mailbox import Stamped
+
+log = logging.getLogger(__name__)
 
 
 class VesselPorts:
@@ -89,6 +92,8 @@ class VesselPorts:
         from bridges.mavlink.params import ParamSpec, ParamType
         from bridges.mavlink.vessel import FAILURE_ENABLE_PARAM, HOLD_PARAM, MavlinkVesselLink
 
+        if c.warning is not None:
+            log.warning("%s", c.warning)
         hold = ParamSpec(
             HOLD_PARAM, int(self._hold), ParamType.INT, 0, 1,
             description="1: the vessel waits at sim time 0 (0 starts it)",
@@ -104,7 +109,8 @@ class VesselPorts:
         from bridges.zenoh_io.link import ZenohLinkError, ZenohVesselLink, load_config
         from bridges.zenoh_io.ros2.endpoints import Ros2Settings
 
-        conf = load_config(c.config, list(c.overrides))  # ZenohConfigError: a ConfigError
+        # ZenohConfigError: a ConfigError
+        conf = load_config(c.config, list(c.overrides), c.allow_unauthenticated)
         try:
             ros2 = Ros2Settings(c.domain_id, c.namespace) if c.ros2 else None
             self.zenoh = ZenohVesselLink(c.vessel, conf, n_thrusters=m, ros2=ros2)

@@ -76,12 +76,26 @@ class MavlinkSettings:
     allocator also ``max_wrench`` (MANUAL_CONTROL full deflection [X N, Y N, N N*m]),
     ``wrench_limit`` (WRENCH_SETPOINT components beyond are dropped as malformed) and
     ``telemetry_from`` (the ``host:port`` inboxes ODOMETRY is accepted from; None: the
-    ``relay`` inboxes, i.e. the vessel's)."""
+    ``relay`` inboxes, i.e. the vessel's). A link beyond loopback without ``key_file`` is an
+    error unless ``allow_unauthenticated`` (:func:`unsigned_exposure`)."""
 
     endpoint: MavlinkEndpoint
     max_wrench: tuple[float, float, float] = (0.3, 0.3, 0.06)
     wrench_limit: tuple[float, float, float] | None = None
     telemetry_from: tuple[str, ...] | None = None
+    # the link reaches beyond loopback unsigned, as ``allow_unauthenticated`` allows: what
+    # does (warned at start), None otherwise
+    unauthenticated: str | None = None
+
+    @property
+    def warning(self) -> str | None:
+        """What to warn of at start, if the link is unsigned beyond loopback."""
+        if self.unauthenticated is None:
+            return None
+        return (
+            f"mavlink: {self.unauthenticated} reaches beyond loopback unsigned "
+            "(allow_unauthenticated = true): anyone on that network can steer the thrusters"
+        )
 
 
 @dataclass(frozen=True)
@@ -90,7 +104,8 @@ class ZenohSettings:
     file and the ``KEY:VALUE`` overrides applied to it (in order); for the allocator
     ``wrench_limit`` (setpoints with a component beyond it are dropped as malformed).
     ``ros2``: also the ROS 2 topics as rmw_zenoh writes them, in ``domain_id`` under
-    ``namespace`` (``""``: ``/<vessel>``; docs/ros2-and-foxglove.md)."""
+    ``namespace`` (``""``: ``/<vessel>``; docs/ros2-and-foxglove.md). ``allow_unauthenticated``:
+    bridges/zenoh_io/config.py's check_settings."""
 
     config: Path
     vessel: str = "ftcap1"
@@ -99,6 +114,9 @@ class ZenohSettings:
     ros2: bool = False
     domain_id: int = 0
     namespace: str = ""
+    # an endpoint beyond loopback without mutual TLS and access control is accepted (and
+    # warned about at start) rather than refused
+    allow_unauthenticated: bool = False
 
 
 @dataclass(frozen=True)
@@ -112,8 +130,30 @@ class PortSettings:
 
 ENDPOINT_KEYS = (
     "connection", "peers", "system_id", "component_id", "relay", "key_file",
-    "authorized_systems", "bind_all_interfaces", "geodetic_origin",
+    "authorized_systems", "bind_all_interfaces", "geodetic_origin", "allow_unauthenticated",
 )  # fmt: skip
+
+
+def unsigned_exposure(t: Table, endpoint: MavlinkEndpoint) -> str | None:
+    """Secure by default: a link that reaches beyond loopback (a bind, a peer, a relay or a
+    target elsewhere) must sign its frames (``key_file``): anyone on that network could
+    otherwise steer the thrusters. ``allow_unauthenticated = true`` is the explicit opt-out
+    (returned, to be logged as a warning at start); an error naming the file, the table and
+    ``key_file`` otherwise. None: loopback only, or signed."""
+    from bridges.mavlink.config import exposure
+
+    allow = t.boolean("allow_unauthenticated", False)
+    reason = exposure(endpoint)
+    if reason is None or endpoint.key_file is not None:
+        return None
+    if not allow:
+        raise t.error(
+            "key_file",
+            f"unset, and {reason} reaches beyond loopback: unsigned, anyone on that network "
+            "could steer the thrusters. Set key_file to a MAVLink 2 signing key "
+            "(docs/security.md), or allow_unauthenticated = true to accept that",
+        )
+    return reason
 
 
 def mavlink_endpoint_from(t: Table, default: MavlinkEndpoint) -> MavlinkEndpoint:
@@ -157,8 +197,10 @@ def _mavlink(t: Table, allocator: bool) -> MavlinkSettings | None:
         t.allow(*(("max_wrench", "wrench_limit", "telemetry_from") if allocator else ()))
         return None
     if not allocator:
-        return MavlinkSettings(mavlink_endpoint_from(t, default_vessel_endpoint()))
+        endpoint = mavlink_endpoint_from(t, default_vessel_endpoint())
+        return MavlinkSettings(endpoint, unauthenticated=unsigned_exposure(t, endpoint))
     endpoint = mavlink_endpoint_from(t, default_allocator_endpoint())
+    unsigned = unsigned_exposure(t, endpoint)
     mx, my, mn = t.vector(
         "max_wrench", 3, defaults_of(MavlinkSettings)["max_wrench"], positive=True
     )
@@ -172,7 +214,8 @@ def _mavlink(t: Table, allocator: bool) -> MavlinkSettings | None:
             parse_host_port("telemetry_from", text)
         except LinkConfigError as e:
             raise t.error(None, str(e)) from e
-    return MavlinkSettings(endpoint, (float(mx), float(my), float(mn)), triple, sources)
+    xyz = (float(mx), float(my), float(mn))
+    return MavlinkSettings(endpoint, xyz, triple, sources, unauthenticated=unsigned)
 
 
 def zenoh_config_path(t: Table, default: str) -> Path:
@@ -192,7 +235,8 @@ def _zenoh(t: Table, default_config: str, allocator: bool) -> ZenohSettings | No
     from bridges.zenoh_io.config import ZenohConfigError, parse_override
 
     if not t.boolean("enabled", True):
-        t.allow("vessel", "config", "connect", "overrides", *(("wrench_limit",) * allocator))
+        t.allow("vessel", "config", "connect", "overrides", "allow_unauthenticated")
+        t.allow(*(("wrench_limit",) * allocator))
         t.allow(*ROS2_KEYS)
         return None
     path = zenoh_config_path(t, default_config)
@@ -213,7 +257,14 @@ def _zenoh(t: Table, default_config: str, allocator: bool) -> ZenohSettings | No
         limit = (float(lx), float(ly), float(ln))
     ros2, domain_id, namespace = _ros2(t)
     vessel = t.string("vessel", defaults_of(ZenohSettings)["vessel"])
-    return ZenohSettings(path, vessel, tuple(overrides), limit, ros2, domain_id, namespace)
+    allow = t.boolean("allow_unauthenticated", False)
+    from bridges.zenoh_io.session import check_config_file
+
+    try:  # refused here, before any port is opened (the session checks it again)
+        check_config_file(path, overrides, allow)
+    except ZenohConfigError as e:
+        raise t.error(None, str(e)) from e
+    return ZenohSettings(path, vessel, tuple(overrides), limit, ros2, domain_id, namespace, allow)
 
 
 ROS2_KEYS = ("ros2", "domain_id", "namespace")

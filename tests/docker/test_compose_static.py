@@ -242,11 +242,22 @@ def test_the_router_departs_from_the_policy_only_by_its_container_listen() -> No
     assert connect == [f"tcp/zenoh:{router_port}"], "clients reach the router by service name"
 
 
-def test_the_clients_pass_the_product_check_as_they_are() -> None:
-    from bridges.zenoh_io.config import ZenohRole
+def test_the_clients_pass_the_product_check_with_the_opt_out_the_services_state() -> None:
+    """Plain tcp to the compose network's router: refused by default (secure by default),
+    accepted with ``zenoh.allow_unauthenticated=true``, which every service that uses the
+    client config states."""
+    from bridges.zenoh_io.config import ZenohConfigError, ZenohRole
     from bridges.zenoh_io.link import validate_config
 
-    assert validate_config(_zenoh_conf("client.json5"), "client.json5") is ZenohRole.CLIENT
+    conf = _zenoh_conf("client.json5")
+    with pytest.raises(ZenohConfigError, match="allow_unauthenticated"):
+        validate_config(conf, "client.json5")
+    assert validate_config(conf, "client.json5", True) is ZenohRole.CLIENT
+    image = read_image()
+    for name, spec in _services((COMPOSE,)).items():
+        argv = container_argv(spec, image) if is_ours(spec) else []
+        if "zenoh.config=/etc/ftcap/zenoh/client.json5" in argv:
+            assert "zenoh.allow_unauthenticated=true" in argv, name
 
 
 def test_the_router_image_is_the_locked_zenoh_release() -> None:
@@ -266,6 +277,7 @@ TOPOLOGY_KEYS = (
     "mavlink.peers=",
     "mavlink.relay=",
     "mavlink.bind_all_interfaces=",
+    "mavlink.allow_unauthenticated=",
     "zenoh.",
 )
 

@@ -265,6 +265,68 @@ def test_bridge_tables_name_bad_values(text: str, message: str) -> None:
         vessel_ports_from(_root(text), 2)
 
 
+@pytest.mark.parametrize(
+    ("table", "shown"),
+    [
+        ('connection = "udpin:0.0.0.0:15000"\nbind_all_interfaces = true',
+         "connection = 'udpin:0.0.0.0:15000'"),
+        ('connection = "udpin:192.0.2.7:15000"', "connection = 'udpin:192.0.2.7:15000'"),
+        ('peers = ["192.0.2.8:14550"]', "peers contains '192.0.2.8:14550'"),
+        ('relay = ["gcs.boat.lan:14560"]', "relay contains 'gcs.boat.lan:14560'"),
+    ],
+)  # fmt: skip
+def test_an_unsigned_mavlink_link_beyond_loopback_is_refused_unless_allowed(
+    table: str, shown: str
+) -> None:
+    """Secure by default (issue 33): a bind, peer or relay off this machine's loopback
+    without a signing key stops the start with the file, table and key; the explicit
+    opt-out starts, with the warning it is logged with; a key file needs no opt-out."""
+    for reader in (vessel_ports_from, allocator_ports_from):
+        with raises(f"f.toml: [mavlink] key_file: unset, and {shown} reaches beyond loopback"):
+            reader(_root(f"[mavlink]\n{table}\n"), 4)
+        allowed = reader(_root(f"[mavlink]\n{table}\nallow_unauthenticated = true\n"), 4)
+        assert allowed.mavlink is not None and allowed.mavlink.unauthenticated == shown
+        assert allowed.mavlink.warning is not None and shown in allowed.mavlink.warning
+        signed = reader(_root(f'[mavlink]\n{table}\nkey_file = "/etc/k.key"\n'), 4)
+        assert signed.mavlink is not None and signed.mavlink.warning is None
+    local = allocator_ports_from(_root('[mavlink]\nconnection = "udpin:[::1]:15000"\n'), 4)
+    assert local.mavlink is not None and local.mavlink.warning is None
+
+
+def test_a_zenoh_endpoint_beyond_loopback_needs_mtls_and_access_control() -> None:
+    """Plain tcp to a router elsewhere is refused naming the key and the opt-out; allowed, it
+    is only warned about; tls with mutual TLS (and on a router, access control denying by
+    default) passes; loopback and unix sockets never count."""
+    from bridges.zenoh_io.config import ZenohConfigError, ZenohRole, check_settings
+
+    client = {
+        "mode": "client", "scouting/multicast/enabled": False,
+        "connect/endpoints": ["tcp/zenoh:7447"],
+    }  # fmt: skip
+    with pytest.raises(ZenohConfigError, match=re.escape(
+        "c.json5: connect/endpoints contains 'tcp/zenoh:7447', beyond loopback without "
+        "mutual TLS and access control"
+    )):  # fmt: skip
+        check_settings(client, "c.json5")
+    with pytest.raises(ZenohConfigError, match="allow_unauthenticated = true"):
+        check_settings(client, "c.json5")
+    assert check_settings(client, "c.json5", allow_unauthenticated=True) is ZenohRole.CLIENT
+    tls = {**client, "connect/endpoints": ["tls/boat.lan:7447"]}
+    with pytest.raises(ZenohConfigError):
+        check_settings(tls)  # tls without mutual authentication: anyone may connect
+    assert check_settings({**tls, "transport/link/tls/enable_mtls": True}) is ZenohRole.CLIENT
+    router = {
+        "mode": "router", "scouting/multicast/enabled": False,
+        "listen/endpoints": ["tls/192.0.2.9:7447"], "transport/link/tls/enable_mtls": True,
+    }  # fmt: skip
+    with pytest.raises(ZenohConfigError, match="listen/endpoints contains 'tls/192.0.2.9"):
+        check_settings(router)  # no access control: any certified client puts anything
+    acl = {"access_control/enabled": True, "access_control/default_permission": "deny"}
+    assert check_settings({**router, **acl}) is ZenohRole.ROUTER
+    local = {**router, "listen/endpoints": ["tcp/127.0.0.1:7447", "unixsock-stream//tmp/z"]}
+    assert check_settings(local) is ZenohRole.ROUTER
+
+
 # ------------------------------------------------------------------ shipped files
 
 

@@ -61,6 +61,8 @@ ALLOCATOR_PORT = 14570
 VESSEL_IDS = (1, 1)  # MAV_COMP_ID_AUTOPILOT1
 ALLOCATOR_IDS = (1, 191)  # MAV_COMP_ID_ONBOARD_COMPUTER
 GCS_IDS = (255, 190)  # MAV_COMP_ID_MISSIONPLANNER
+MAVSDK_SYSTEM_ID = 245  # MAVSDK's default own system id (a client with its defaults)
+GROUND_STATIONS = (GCS_IDS[0], MAVSDK_SYSTEM_ID)  # obeyed by default: QGC/MAVProxy, MAVSDK
 
 
 def parse_host_port(key: str, value: str) -> tuple[str, int]:

@@ -35,7 +35,7 @@ from pymavlink import mavutil  # noqa: E402  (must follow the MAVLINK20 switch)
 
 from bridges.mavlink import dialect as mavlink_dialect  # noqa: E402
 from bridges.mavlink.codec import Severity, SystemStatus  # noqa: E402
-from bridges.mavlink.config import GCS_IDS, MavlinkEndpoint  # noqa: E402
+from bridges.mavlink.config import GROUND_STATIONS, MavlinkEndpoint  # noqa: E402
 from bridges.mavlink.errors import LinkConfigError  # noqa: E402
 from bridges.mavlink.gate import InboxGate, PortStats  # noqa: E402
 from bridges.mavlink.peers import Address, PeerTable, TrafficLimits  # noqa: E402
@@ -91,7 +91,7 @@ class MavlinkPort:
         heartbeat_period_s: float = 1.0,
         poll_s: float = 0.05,
         tick: Callable[[int], None] | None = None,
-        default_authorized: tuple[int, ...] = (GCS_IDS[0],),
+        default_authorized: tuple[int, ...] = GROUND_STATIONS,
         limits: TrafficLimits | None = None,
     ) -> None:
         self.endpoint = endpoint

@@ -8,6 +8,7 @@ from __future__ import annotations
 import hashlib
 import math
 import time
+import tomllib
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from bridges.mavlink.vessel import (
 )
 from ftcap_hil.config.bridges import mavlink_endpoint_from
 from ftcap_hil.config.tables import Table
+from ftcap_hil.config.toml import shipped_config
 from ftcap_hil.core.errors import ConfigError
 from tests.support.mavlink_peers import (
     DIALECT,
@@ -211,6 +213,29 @@ def test_the_allowlist_is_configurable(allocator) -> None:
         assert wait_until(lambda: link.setpoint.latest() is not None)
     with pytest.raises(ConfigError, match=r"\[mavlink\] authorized_systems"):
         _from_table({"authorized_systems": [0]})
+
+
+def test_mavsdk_with_its_defaults_is_served_by_default(allocator) -> None:
+    """MAVSDK's own system id is 245 unless told otherwise: with the link's defaults (and
+    the shipped files') its setpoints count, as a ground station's (255) do; another id
+    is still refused."""
+    link_port, gcs_port = free_udp_ports(2)
+    endpoint = MavlinkEndpoint(
+        f"udpin:127.0.0.1:{link_port}", SYS, COMP, (f"127.0.0.1:{gcs_port}",)
+    )
+    config = AllocatorLinkConfig(n_thrusters=4, max_wrench=(1.0, 1.0, 1.0))
+    with (
+        MavlinkAllocatorLink(config, endpoint, PARAMS) as link,
+        RawPeer(f"udpout:127.0.0.1:{link_port}", (246, 190)) as other,
+        RawPeer(f"udpout:127.0.0.1:{link_port}", (245, 190)) as mavsdk,
+    ):
+        other.mav.wrench_setpoint_send(1, SYS, COMP, 0.5, 0.0, 0.0)
+        assert wait_until(lambda: link.stats.unknown_system == 1)
+        assert link.setpoint.latest() is None
+        mavsdk.mav.wrench_setpoint_send(1, SYS, COMP, 0.5, 0.0, 0.0)
+        assert wait_until(lambda: link.setpoint.latest() is not None)
+    shipped = _from_table(tomllib.loads(shipped_config("allocator.toml").read_text())["mavlink"])
+    assert shipped.authorized_systems == (255, 245)
 
 
 def test_fault_injection_only_from_authorized_senders() -> None:

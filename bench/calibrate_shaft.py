@@ -16,7 +16,8 @@ tune a detector on logs:
 * **bands**: in bins of the predicted speed, in units of the telemetry's speed resolution
   (the preset's ``[diagnosis] speed_resolution``), the 99.5th percentile of the absolute
   speed error over 3 is the band there; a line through the bins (least squares, both
-  coefficients >= 0) gives ``band_rel`` and ``band_res``; the same over the servos'
+  coefficients >= 0) gives ``band_rel`` and ``band_res`` (at least half a step: a reading is
+  known no better than its rounding); the same over the servos'
   deflections ``servo_band_rel`` and ``servo_band_res`` (where the preset has servos), and
   over the predicted load current ``current_rel`` and ``current_abs``;
 * **thresholds**: the CUSUM of the residuals in those bands, per thruster and run, and
@@ -159,7 +160,10 @@ def fit(traces: list[list[ResidualSample]], resolution: float) -> dict[str, floa
         if len(group) >= 200:
             x = np.array([s.speed for s in group]) / resolution
             e = np.array([s.speed_error for s in group]) / resolution
-            out[prefix + "band_rel"], out[prefix + "band_res"] = fit_band(x, e)
+            rel, res = fit_band(x, e)
+            # never under half a step: a reading is known no better than its rounding (the
+            # diagnosis floors it there too)
+            out[prefix + "band_rel"], out[prefix + "band_res"] = rel, max(res, 0.5)
     load = np.array([s.load_a for s in shafts])
     le = np.array([s.load_error_a for s in shafts])
     current = fit_band(load, le) if np.isfinite(le).sum() > 100 else LOOSE_CURRENT

@@ -255,6 +255,26 @@ def test_a_servo_stuck_or_limp_is_seen_from_its_position() -> None:
     assert limp.first(20.0, Hypothesis.DRIVE_DEAD) <= 0.6
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_servo_a_step_or_two_off_centre_is_judged_no_finer_than_its_reading(
+    seed: int,
+) -> None:
+    """CyberShip II's rudders: a deflection read in steps of 1/60, a band fitted at 0.13 of a
+    step (its healthy residuals sit inside the lag's range). Near the centre, 1-3 steps out,
+    the rounding alone read as a weak or frozen servo (seeds 0 and 1); the band is never
+    under half a step, and the same flight raises nothing, while a servo at 40 % is still
+    named weak once it deflects measurably."""
+    servo = DriveModel(FULL, TC * 1.25, is_shaft=False)
+    cfg = DiagnosisConfig(latency_s=0.02, servo_band_res=0.13)
+    near = {"actuator": Servo(), "model": servo, "seed": seed, "config": cfg}
+    quiet = fly(Cause.HEALTHY, 1.0, level=0.03 * FULL, **near)
+    assert quiet.raised_before(math.inf) <= {Hypothesis.HEALTHY}
+    weak = fly(Cause.WEAK_MOTOR, 0.4, level=0.1 * FULL, **near)
+    assert weak.raised_before(20.0) <= {Hypothesis.HEALTHY}
+    assert weak.first(20.0, Hypothesis.WEAK) <= 1.0
+    assert Hypothesis.DRIVE_DEAD not in weak.raised_before(math.inf)
+
+
 def test_no_telemetry_at_all_is_motion_only() -> None:
     v = verdict_without_telemetry(3)
     assert v.hypothesis == (Hypothesis.TELEMETRY_LOST,) * 3

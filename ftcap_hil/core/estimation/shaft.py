@@ -14,9 +14,10 @@ quantity the drive measures: its speed, at the speed it runs::
                                                       negative either way round
     r_Q = (I_m - I(n_m)) / sigma_I                    the current against what the load at
                                                       the measured speed draws (A)
-    sigma_n = band_rel |n_p| + band_res speed_resolution + spread(n_p) (servos: their own
-              servo_band_*), n_p through the learnt speed map (SpeedMap: its spread is
-              what it does not know yet), and n_m - n_p taken from the nearest of the
+    sigma_n = band_rel |n_p| + max(band_res, 1/2) speed_resolution + spread(n_p) (servos:
+              their own servo_band_*; a reading is known no better than its rounding),
+              n_p through the learnt speed map (SpeedMap: its spread is what it does not
+              know yet), and n_m - n_p taken from the nearest of the
               predictions with the lag T_n (1 + lag_uncertainty)^(+-1) and within
               +-timing_s (the drive's lag and the sample's time are known no better)
     sigma_I = current_rel (I(n_m) - I_idle) + current_abs

@@ -195,10 +195,14 @@ class Channel:
         n_full = abs(self.reference(model.full_force_n))
         # true against data sheet
         self.speed_map = SpeedMap(cfg, n_full, model.is_shaft, offset=not model.speed_loop)
-        if model.is_shaft:  # the band: bands_rel |n| + bands_res x the telemetry's resolution
-            self.bands = (cfg.band_rel, cfg.band_res * cfg.speed_resolution)
-        else:
-            self.bands = (cfg.servo_band_rel, cfg.servo_band_res * cfg.speed_resolution)
+        # the band: bands_rel |n| + bands_res x the telemetry's resolution, never under half
+        # a step (a reading is known no better than its rounding: a servo 1 step off centre
+        # reads 0 or 1 step whatever its fault)
+        rel, res = (
+            (cfg.band_rel, cfg.band_res) if model.is_shaft
+            else (cfg.servo_band_rel, cfg.servo_band_res)
+        )  # fmt: skip
+        self.bands = (rel, max(res, 0.5) * cfg.speed_resolution)
         self.load_model = LoadModel(model, cfg, n_full)
         # a load current lost in the sensor's noise says nothing (a small tunnel thruster)
         self.load_visible = (

@@ -132,6 +132,8 @@ def _thrusters(root: Table) -> tuple[ThrusterSet, FloatArray]:
     """``[[thruster]]``: the vessel tables' thruster reader, plus each thruster's first-order
     lag ``time_constant_s`` (s, >= 0)."""
     ths = thruster_set_from(root)
+    if ths.dofs != 3:
+        raise root.error("dofs", "a surface-vessel preset is allocated in 3 DOF (X, Y, N)")
     lags = [t.number("time_constant_s", lo=0.0) for t in root.tables("thruster")]
     return ths, np.array(lags)
 

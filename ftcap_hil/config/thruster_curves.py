@@ -90,5 +90,6 @@ def limited_to_curves(ths: ThrusterSet, curves: tuple[ThrusterCurve, ...] | None
         tuple(
             replace(th, u_min=max(th.u_min, c.thrust_min_n), u_max=min(th.u_max, c.thrust_max_n))
             for th, c in zip(ths.thrusters, curves, strict=True)
-        )
+        ),
+        ths.dofs,
     )

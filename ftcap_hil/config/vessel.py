@@ -18,6 +18,7 @@ from ftcap_hil.config.table_dataclass import read_dataclass
 from ftcap_hil.config.tables import Table
 from ftcap_hil.config.toml import read_toml
 from ftcap_hil.core.effectiveness.geometry import (
+    WRENCH_AXES,
     Thruster,
     ThrusterSet,
     effectiveness,
@@ -38,31 +39,41 @@ class PlantKind(enum.Enum):
     PRESET = "preset"  # a realistic vessel preset (scenario files only, config/realistic.py)
 
 
-def _angle_rad(t: Table) -> float:
+def _direction(t: Table) -> tuple[float, float]:
+    """(azimuth, elevation) in rad from ``angle_deg`` (+ ``elevation_deg``) or ``direction``
+    = [dx, dy] or [dx, dy, dz] (body axes, z down)."""
     if t.has("direction"):
-        if t.has("angle_deg"):
-            raise t.error(None, "give angle_deg or direction = [dx, dy], not both")
-        dx, dy = t.vector("direction", 2)
-        if math.hypot(dx, dy) == 0.0:
+        if t.has("angle_deg") or t.has("elevation_deg"):
+            raise t.error(None, "give angle_deg (and elevation_deg) or direction, not both")
+        d = t.vector("direction")
+        if d.size not in (2, 3):
+            raise t.error("direction", f"expected [dx, dy] or [dx, dy, dz], got {d.size} numbers")
+        dx, dy, dz = float(d[0]), float(d[1]), float(d[2]) if d.size == 3 else 0.0
+        horizontal = math.hypot(dx, dy)
+        if math.hypot(horizontal, dz) == 0.0:
             raise t.error("direction", "zero vector")
-        t.allow("angle_deg")
-        return math.atan2(dy, dx)
+        t.allow("angle_deg", "elevation_deg")
+        return math.atan2(dy, dx), math.atan2(dz, horizontal)
     t.allow("direction")
-    return math.radians(t.number("angle_deg"))
+    elevation = t.number("elevation_deg", 0.0, lo=-90.0, hi=90.0)
+    return math.radians(t.number("angle_deg")), math.radians(elevation)
 
 
 def thruster_from(t: Table) -> Thruster:
     """One ``[[thruster]]`` entry, of a vessel table or a vessel preset alike: ``name``
-    (default ``T<n>``, 1-based), ``x``, ``y`` (m), ``angle_deg`` or ``direction = [dx, dy]``,
+    (default ``T<n>``, 1-based), ``x``, ``y`` and optionally ``z`` (m; z down), ``angle_deg``
+    (with optional ``elevation_deg``, positive down) or ``direction = [dx, dy(, dz)]``,
     ``u_min`` <= 0 <= ``u_max`` (N), and optionally ``rate_max`` (N/s) or ``step_max`` (N per
     cycle), not both."""
     name = t.string("name", f"T{(t.index or 0) + 1}")
-    angle = _angle_rad(t)
+    angle, elevation = _direction(t)
     thruster = Thruster(
         name=name,
         x_m=t.number("x"),
         y_m=t.number("y"),
+        z_m=t.number("z", 0.0),
         angle_rad=angle,
+        elevation_rad=elevation,
         u_min=t.number("u_min"),
         u_max=t.number("u_max"),
         rate_max=t.number("rate_max", None, positive=True),
@@ -77,12 +88,16 @@ def thruster_from(t: Table) -> Thruster:
 
 def thruster_set_from(t: Table) -> ThrusterSet:
     """The ``[[thruster]]`` array of ``t`` (at least one, :func:`thruster_from` each), with
-    distinct names: the one reader of thruster tables (vessel tables and presets)."""
+    distinct names, and ``dofs`` (3, the default: X, Y, N; 6 for an underwater vehicle): the
+    one reader of thruster tables (vessel tables and presets)."""
+    dofs = t.integer("dofs", 3)
+    if dofs not in WRENCH_AXES:
+        raise t.error("dofs", f"expected 3 (X, Y, N) or 6 (X, Y, Z, K, M, N), got {dofs}")
     thrusters = tuple(thruster_from(e) for e in t.tables("thruster", required=True))
     names = [th.name for th in thrusters]
     if len(set(names)) != len(names):
         raise t.error("thruster", f"duplicate names in {names}")
-    return ThrusterSet(thrusters)
+    return ThrusterSet(thrusters, dofs)
 
 
 def _preset(t: Table) -> ThrusterSet:
@@ -145,7 +160,10 @@ def plant_from(root: Table) -> tuple[LinearPlant | SurfaceVessel, ThrusterSet, F
     if kind is PlantKind.LINEAR:
         return _linear(root, plant_t)
     vessel = read_dataclass(plant_t, SurfaceVessel, exclude=("k", "state_labels"))
-    ths = thrusters_from(root.table("vessel", required=True))
+    vessel_t = root.table("vessel", required=True)
+    ths = thrusters_from(vessel_t)
+    if ths.dofs != 3:
+        raise vessel_t.error("dofs", "the surface-vessel plant is simulated in 3 DOF (X, Y, N)")
     return vessel, ths, effectiveness(ths)
 
 

@@ -61,7 +61,7 @@ def test_an_unnamed_thruster_is_named_by_its_position_in_both(tmp_path: Path) ->
 RULES = [
     ({"rate_max": 1.0, "step_max": 0.1}, "give rate_max or step_max, not both"),
     ({"u_min": 1.0}, "need u_min <= 0 <= u_max, got 1.0, 2.0"),
-    ({"direction": [0.0, 1.0]}, "give angle_deg or direction = [dx, dy], not both"),
+    ({"direction": [0.0, 1.0]}, "give angle_deg (and elevation_deg) or direction, not both"),
     ({"rate_max": -1.0}, "rate_max: expected a finite number > 0, got -1.0"),
 ]
 

@@ -7,6 +7,14 @@ unit direction a_i = (cos alpha_i, sin alpha_i) with force u_i (N) produces the 
 
 so B (3 x m) has those columns. Faults act as tau = B (Delta u + f), eq. (23) of the paper.
 
+In six degrees of freedom (an underwater vehicle; body axes x forward, y starboard, z down,
+Fossen's convention) the thruster sits at r_i = (x_i, y_i, z_i) and pushes along
+d_i = (cos e_i cos alpha_i, cos e_i sin alpha_i, sin e_i), e_i its elevation (positive
+down: a thruster pushing the vehicle up has e = -90 deg). Its column of B (6 x m) is the
+force and the moment about the body origin, [d_i; r_i x d_i], for [X, Y, Z, K, M, N]; the
+rows X, Y, N of a thruster in the plane (z = 0, e = 0) are exactly its 3-DOF column. The
+allocation (``allocator.py``) is the same QP for any number of wrench axes.
+
 The paper's eq. (22) is the special case alpha = pi/4 with four thrusters on a circle of
 radius l/2 (``paper_four_thrusters``); the paper never gives l, we default to 0.3 m.
 """
@@ -20,6 +28,8 @@ import numpy as np
 
 from ftcap_hil.core.messages import FloatArray
 
+WRENCH_AXES = {3: ("X", "Y", "N"), 6: ("X", "Y", "Z", "K", "M", "N")}  # per number of DOF
+
 
 @dataclass(frozen=True)
 class Thruster:
@@ -27,7 +37,8 @@ class Thruster:
 
     ``rate_max`` is the largest change of command per second (N/s); ``step_max`` the largest
     change per allocator cycle (N), the paper's form (eq. 2). At most one may be given; if
-    both are None the rate is unlimited.
+    both are None the rate is unlimited. ``z_m`` (m, down) and ``elevation_rad`` (the thrust
+    line's angle below the horizontal plane) matter only in six degrees of freedom.
     """
 
     name: str
@@ -38,11 +49,29 @@ class Thruster:
     u_max: float
     rate_max: float | None = None
     step_max: float | None = None
+    z_m: float = 0.0
+    elevation_rad: float = 0.0
+
+    def direction(self) -> FloatArray:
+        """Unit thrust direction (3,) in body axes (x forward, y starboard, z down)."""
+        ce = math.cos(self.elevation_rad)
+        a = self.angle_rad
+        return np.array([ce * math.cos(a), ce * math.sin(a), math.sin(self.elevation_rad)])
 
     def column(self) -> FloatArray:
-        """This thruster's column of B (3,): [cos a, sin a, x sin a - y cos a] per N."""
+        """This thruster's column of B (3,): [cos a, sin a, x sin a - y cos a] per N (the
+        horizontal part of its thrust when it is tilted out of the plane)."""
         c, s = math.cos(self.angle_rad), math.sin(self.angle_rad)
+        if self.elevation_rad:
+            ce = math.cos(self.elevation_rad)
+            c, s = ce * c, ce * s
         return np.array([c, s, self.x_m * s - self.y_m * c])
+
+    def column6(self) -> FloatArray:
+        """This thruster's column of B in 6 DOF (6,): [d; r x d] per N (module docstring)."""
+        d = self.direction()
+        r = np.array([self.x_m, self.y_m, self.z_m])
+        return np.concatenate([d, np.cross(r, d)])
 
     def max_step(self, dt_s: float) -> float:
         """Largest command change allowed in one cycle of length dt_s."""
@@ -55,9 +84,16 @@ class Thruster:
 
 @dataclass(frozen=True)
 class ThrusterSet:
-    """The vessel's thrusters in vessel-file order (index i = column i of B)."""
+    """The vessel's thrusters in vessel-file order (index i = column i of B); ``dofs``: the
+    wrench the vessel is allocated in, 3 (X, Y, N: a surface vessel) or 6 (an underwater
+    vehicle)."""
 
     thrusters: tuple[Thruster, ...]
+    dofs: int = 3
+
+    def __post_init__(self) -> None:
+        if self.dofs not in WRENCH_AXES:
+            raise ValueError(f"ThrusterSet.dofs: 3 or 6, got {self.dofs}")
 
     @property
     def m(self) -> int:
@@ -84,9 +120,16 @@ class ThrusterSet:
         return np.array([t.max_step(dt_s) for t in self.thrusters])
 
 
-def effectiveness(thrusters: ThrusterSet) -> FloatArray:
-    """B (3 x m): columns [cos a, sin a, x sin a - y cos a] (N, N, N*m per N of thrust)."""
-    return np.column_stack([t.column() for t in thrusters.thrusters])
+def effectiveness(thrusters: ThrusterSet, dofs: int | None = None) -> FloatArray:
+    """B (3 x m): columns [cos a, sin a, x sin a - y cos a] (N, N, N*m per N of thrust);
+    in 6 DOF, B (6 x m) for [X, Y, Z, K, M, N] (module docstring). ``dofs``: the set's own
+    unless given (a 6-DOF vehicle's horizontal 3-DOF B, for instance)."""
+    dofs = thrusters.dofs if dofs is None else dofs
+    if dofs == 3:
+        return np.column_stack([t.column() for t in thrusters.thrusters])
+    if dofs == 6:
+        return np.column_stack([t.column6() for t in thrusters.thrusters])
+    raise ValueError(f"effectiveness: dofs is 3 or 6, got {dofs}")
 
 
 def command_bounds(

@@ -12,9 +12,12 @@ Semantics, as close to a real bus as the hub allows: every frame sent by another
 received once, in order; own frames only with ``receive_own_messages=True``. ``send`` writes
 straight to the socket (nothing is queued in this process, so ``flush_tx_buffer`` is a
 no-op) and only blocks if the hub stops reading, for at most ``send_timeout_s``. If the hub
-goes away, the next ``recv`` raises ``CanOperationError`` once, later ones behave like a
-silent bus, and ``send`` raises ``CanOperationError``; after ``shutdown()`` both raise
-``CanOperationError`` (a thread blocked in ``recv`` is woken with it). ``fileno()`` is not
+goes away, that is said once (a warning on this module's logger), ``state`` becomes
+``BusState.ERROR``, ``recv`` behaves like a silent bus and ``send`` raises
+``CanOperationError``: a python-can ``Notifier`` keeps running (an exception from ``recv``
+would end its thread with a traceback in any client without an ``on_error`` listener), and
+the application learns of it where it acts, on its next send. After ``shutdown()`` both
+raise ``CanOperationError`` (a thread blocked in ``recv`` is woken with it). ``fileno()`` is not
 offered because several frames may be buffered per socket read; python-can's Notifier then
 uses a thread.
 """
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import logging
 import select
 import socket
 import threading
@@ -47,6 +51,7 @@ from bridges.can_io.hub import (
 )
 
 INTERFACE_NAME = "canhub"
+log = logging.getLogger(__name__)
 
 
 def pack_message(msg: can.Message) -> bytes:
@@ -127,6 +132,22 @@ class CanHubBus(can.BusABC):
         super().__init__(channel=self._channel_name, can_filters=can_filters, **kwargs)
         self._can_protocol = can.CanProtocol.CAN_FD
 
+    @property
+    def state(self) -> can.BusState:
+        """``ERROR`` once the hub is gone, else ``ACTIVE``."""
+        return can.BusState.ERROR if self._peer_gone else can.BusState.ACTIVE
+
+    @state.setter
+    def state(self, new_state: can.BusState) -> None:
+        raise NotImplementedError("canhub: the bus state follows the hub; it cannot be set")
+
+    def _gone(self, why: str) -> None:
+        """The hub is lost: say so once; from now on a silent bus that refuses to send."""
+        if not self._peer_gone:
+            self._peer_gone = True
+            log.warning("canhub: hub %s %s: receiving nothing more, send raises CanOperationError",
+                        self._channel_name, why)  # fmt: skip
+
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Write one frame to the hub. ``timeout`` is bounded by ``send_timeout_s``."""
         if self._is_shutdown:
@@ -139,7 +160,7 @@ class CanHubBus(can.BusABC):
                 self._sock.sendall(record)
         except OSError as e:
             # A timed-out sendall may have written part of a record: the stream is lost.
-            self._peer_gone = True
+            self._gone(f"refused a frame ({e})")
             raise can.CanOperationError(f"canhub: send failed: {e}") from e
         if self._own:
             own = can.Message(
@@ -177,22 +198,24 @@ class CanHubBus(can.BusABC):
                 if self._sock in ready:
                     self._read_socket()
             except (OSError, ValueError) as e:
-                why = "bus was shut down" if self._is_shutdown else f"receive failed: {e}"
-                raise can.CanOperationError(f"canhub: {why}") from e
+                if self._is_shutdown:
+                    raise can.CanOperationError("canhub: bus was shut down") from e
+                self._gone(f"failed ({e})")
+                continue  # now a silent bus: wait out the timeout on the wake pipe
             if not ready and not self._rx:
                 return None, False
 
     def _read_socket(self) -> None:
         data = self._sock.recv(1 << 16)
         if not data:
-            self._peer_gone = True
-            raise can.CanOperationError(f"canhub: hub {self._channel_name} closed the connection")
+            self._gone("closed the connection")
+            return
         self._rbuf += data
         try:
             whole, _ = split_records(self._rbuf)
         except HubProtocolError as e:
-            self._peer_gone = True
-            raise can.CanOperationError(f"canhub: {e}") from e
+            self._gone(f"broke the protocol ({e})")
+            return
         if whole:
             self._rx.extend(unpack_records(self._rbuf[:whole], time.time(), self._channel_name))
             del self._rbuf[:whole]

@@ -1,9 +1,17 @@
-"""DroneCAN node services: GetNodeInfo answered, node-ID conflicts detected, node health.
+"""DroneCAN node services: GetNodeInfo and param.GetSet answered, node-ID conflicts
+detected, node health.
 
 ``CanNodeServer`` serves one or more node IDs on a bus (the allocator's node; on the vessel
 side, each simulated ESC's): it answers ``uavcan.protocol.GetNodeInfo`` requests addressed to
 them (name, software version, unique ID, the node's current NodeStatus), which is how the
-DroneCAN GUI tool, ``dronecan``'s ``NodeMonitor`` and autopilots list a bus.
+DroneCAN GUI tool, ``dronecan``'s ``NodeMonitor`` and autopilots list a bus, and
+``uavcan.protocol.param.GetSet`` for the nodes given parameters (:class:`NodeParam`), as an
+AP_Periph node does: by index (0, 1, ... until an empty answer: how the GUI tool lists
+them) or by name, each answer with the value, default, bounds and name. A request to set a
+read-only parameter, or with a value of another type or out of bounds, changes nothing and
+is answered with the value as it is (the protocol's "the actual value after the update").
+Requests longer than a frame are reassembled with ``dronecan``'s own transport codec; a
+malformed one (bad CRC, toggle, unknown type) is counted (``bad_requests``) and dropped.
 
 Node-ID conflicts. DroneCAN has no authentication: any node may send with any source ID, so
 a second node claiming ours (misconfigured or hostile) can only be detected, not prevented.
@@ -31,12 +39,12 @@ import hashlib
 import logging
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import can
 import dronecan
-from dronecan.transport import Transfer
+from dronecan.transport import Frame, Transfer, TransferManager
 
 from bridges.can_io.codec import (
     PRIORITY_LOWEST,
@@ -50,12 +58,90 @@ from bridges.can_io.codec import (
     Received,
     check_node_id,
 )
+from ftcap_hil.core.effectiveness.geometry import Thruster
 from ftcap_hil.core.status import AllocatorStatus
 
 log = logging.getLogger(__name__)
 
 GET_NODE_INFO = dronecan.uavcan.protocol.GetNodeInfo
 GET_NODE_INFO_ID = GET_NODE_INFO.default_dtid  # 1
+GET_SET = dronecan.uavcan.protocol.param.GetSet
+GET_SET_ID = GET_SET.default_dtid  # 11
+
+ParamValue = bool | int | float | str
+_MAX_PARTIAL = 32  # unfinished multi-frame requests kept at once (a GetSet by name: 1-16 frames)
+
+
+@dataclass
+class NodeParam:
+    """One parameter a node serves over param.GetSet: ``name`` (<= 92 ASCII characters),
+    its ``value`` (bool, int, float or str: the protocol's boolean, integer, real or string
+    value), its ``default`` (the value if None), optional numeric bounds, and whether a
+    GetSet may change it. Mutable: the server updates ``value`` on an accepted set."""
+
+    name: str
+    value: ParamValue
+    default: ParamValue | None = None
+    minimum: float | None = None
+    maximum: float | None = None
+    writable: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.name or len(self.name) > 92 or not self.name.isascii():
+            raise ValueError(f"param name: 1..92 ASCII characters, got {self.name!r}")
+        if self.default is None:
+            self.default = self.value
+
+    def accepts(self, value: ParamValue) -> bool:
+        """Whether a set to ``value`` is allowed (writable, same type, within bounds)."""
+        if not self.writable or type(value) is not type(self.value):
+            return False
+        if isinstance(value, bool | str):
+            return True
+        low = self.minimum is None or value >= self.minimum
+        return low and (self.maximum is None or value <= self.maximum)
+
+
+def _put_value(field: object, value: ParamValue | None, numeric: bool = False) -> None:
+    """Set a param.Value (or NumericValue with ``numeric``) union to ``value`` (None: empty)."""
+    if value is None:
+        return
+    if isinstance(value, bool):
+        if not numeric:
+            field.boolean_value = int(value)  # type: ignore[attr-defined]
+    elif isinstance(value, int):
+        field.integer_value = value  # type: ignore[attr-defined]
+    elif isinstance(value, float):
+        field.real_value = value  # type: ignore[attr-defined]
+    elif not numeric:
+        field.string_value = value  # type: ignore[attr-defined]
+
+
+def _get_value(field: object) -> ParamValue | None:
+    """A received param.Value union as a Python value (None: empty)."""
+    tag = dronecan.get_active_union_field(field)
+    if tag == "integer_value":
+        return int(field.integer_value)  # type: ignore[attr-defined]
+    if tag == "real_value":
+        return float(field.real_value)  # type: ignore[attr-defined]
+    if tag == "boolean_value":
+        return bool(field.boolean_value)  # type: ignore[attr-defined]
+    if tag == "string_value":
+        return bytes(field.string_value).decode("ascii", "replace")  # type: ignore[attr-defined]
+    return None
+
+
+def get_set_response(param: NodeParam | None) -> object:
+    """The GetSet response for ``param`` (None: the empty answer that ends a listing)."""
+    response = GET_SET.Response()
+    if param is None:
+        return response
+    _put_value(response.value, param.value)
+    _put_value(response.default_value, param.default)
+    _put_value(response.max_value, param.maximum, numeric=True)
+    _put_value(response.min_value, param.minimum, numeric=True)
+    response.name = param.name
+    return response
 
 
 @dataclass(frozen=True)
@@ -117,24 +203,13 @@ def node_info_response_frames(
 
 @dataclass(frozen=True)
 class ServiceRequest:
-    """A single-frame service request seen on the bus."""
+    """A service request to a served node, as received (its transfer reassembled)."""
 
     service_id: int
     source_node_id: int
     dest_node_id: int
     transfer_id: int
     priority: int
-
-    @classmethod
-    def parse(cls, can_id: int, data: bytes) -> ServiceRequest | None:
-        """None unless a service *request* in one frame (GetNodeInfo's is empty)."""
-        if not can_id & 0x80 or not can_id & 0x8000 or not data or len(data) > 8:
-            return None
-        tail = data[-1]
-        if tail & 0xC0 != 0xC0 or tail & 0x20 or not can_id & 0x7F:
-            return None
-        return cls((can_id >> 16) & 0xFF, can_id & 0x7F, (can_id >> 8) & 0x7F, tail & 0x1F,
-                   (can_id >> 24) & 0x1F)  # fmt: skip
 
 
 class Conflict:
@@ -239,7 +314,8 @@ def _data_type_of(got: Received) -> int:
 
 
 class CanNodeServer(can.Listener):
-    """Answers GetNodeInfo for ``nodes`` and flags others sending as them (module docstring).
+    """Answers GetNodeInfo for ``nodes`` (and param.GetSet for those in ``params``) and flags
+    others sending as them (module docstring).
 
     ``status(node_id)`` gives the NodeStatus to report in a response (the node's current
     health, mode and uptime). Joins ``notifier`` (python-can allows one per bus: pass the
@@ -255,9 +331,22 @@ class CanNodeServer(can.Listener):
         notifier: can.Notifier | None = None,
         clear_after_s: float = 3.0,
         send_timeout_s: float = 0.01,
+        params: Mapping[int, Sequence[NodeParam]] | None = None,
     ) -> None:
         self.bus = bus
         self.nodes = {check_node_id("nodes", n): info for n, info in nodes.items()}
+        self.params = {n: list(ps) for n, ps in (params or {}).items()}
+        unknown = sorted(set(self.params) - set(self.nodes))
+        if unknown:
+            raise ValueError(f"params for nodes not served: {unknown}")
+        for n, ps in self.params.items():
+            names = [p.name for p in ps]
+            if len(set(names)) != len(names):
+                raise ValueError(f"node {n}: duplicate parameter names in {names}")
+        self._transfers = TransferManager()
+        self.bad_requests = 0
+        self.params_answered = 0
+        self.sets_refused = 0
         self._status = status
         self._send_timeout_s = send_timeout_s
         self._conflicts = {n: Conflict(f"node {n}", clear_after_s) for n in self.nodes}
@@ -284,10 +373,9 @@ class CanNodeServer(can.Listener):
         if self._closed or not msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
             return
         can_id, data = msg.arbitration_id, bytes(msg.data)
-        request = ServiceRequest.parse(can_id, data)
-        if request is not None:
-            if request.service_id == GET_NODE_INFO_ID and request.dest_node_id in self.nodes:
-                self._answer(request)
+        if can_id & 0x8080 == 0x8080:  # a service request: ours if addressed to a served ID
+            if (can_id >> 8) & 0x7F in self.nodes and data:
+                self._request_frame(can_id, data)
             return
         fid = FrameId.parse(can_id)
         if fid is not None and fid.source_node_id in self.nodes:
@@ -296,13 +384,58 @@ class CanNodeServer(can.Listener):
                 time.monotonic_ns(), f"a frame 0x{can_id:08X} from our own ID"
             )
 
-    def _answer(self, request: ServiceRequest) -> None:
-        node = request.dest_node_id
-        frames = node_info_response_frames(
-            self.nodes[node], self._status(node), source_node_id=node,
-            dest_node_id=request.source_node_id, transfer_id=request.transfer_id,
-            priority=request.priority,
+    def _request_frame(self, can_id: int, data: bytes) -> None:
+        """One frame of a request to us: a complete transfer is decoded and answered."""
+        frames = self._transfers.receive_frame(Frame(can_id, data))
+        active = self._transfers.active_transfers
+        while len(active) > _MAX_PARTIAL:  # a flood of unfinished transfers: oldest out
+            oldest = next(iter(active))
+            del active[oldest], self._transfers.active_transfer_timestamps[oldest]
+            self.bad_requests += 1
+        if frames is None:
+            return
+        transfer = Transfer()
+        try:
+            transfer.from_frames(frames)
+        except (dronecan.UAVCANException, ValueError, IndexError) as e:
+            self.bad_requests += 1
+            log.debug("malformed service request 0x%08X dropped: %s", can_id, e)
+            return
+        request = ServiceRequest(
+            transfer.data_type_id, transfer.source_node_id, transfer.dest_node_id,
+            transfer.transfer_id, transfer.transfer_priority,
         )  # fmt: skip
+        if request.service_id == GET_NODE_INFO_ID:
+            self._answer(request)
+        elif request.service_id == GET_SET_ID and request.dest_node_id in self.params:
+            self._answer_param(request, transfer.payload)
+
+    def _answer_param(self, request: ServiceRequest, payload: object) -> None:
+        params = self.params[request.dest_node_id]
+        name = bytes(payload.name).decode("ascii", "replace")  # type: ignore[attr-defined]
+        if name:
+            param = next((p for p in params if p.name == name), None)
+        else:
+            index = int(payload.index)  # type: ignore[attr-defined]
+            param = params[index] if index < len(params) else None
+        value = _get_value(payload.value)  # type: ignore[attr-defined]
+        if param is not None and value is not None:
+            if param.accepts(value):
+                param.value = value
+            else:
+                self.sets_refused += 1
+                log.debug("node %d: set %s = %r refused", request.dest_node_id, param.name, value)
+        transfer = Transfer(
+            transfer_id=request.transfer_id, source_node_id=request.dest_node_id,
+            dest_node_id=request.source_node_id, payload=get_set_response(param),
+            transfer_priority=request.priority, request_not_response=False,
+            service_not_message=True,
+        )  # fmt: skip
+        frames = [(f.message_id, bytes(f.bytes)) for f in transfer.to_frames()]
+        if self._send(frames, request.dest_node_id, "param.GetSet"):
+            self.params_answered += 1
+
+    def _send(self, frames: list[tuple[int, bytes]], node: int, what: str) -> bool:
         try:
             for can_id, data in frames:
                 self.bus.send(
@@ -311,9 +444,19 @@ class CanNodeServer(can.Listener):
                 )
         except (can.CanError, OSError) as e:
             self.send_errors += 1
-            log.debug("GetNodeInfo response from node %d failed: %s", node, e)
-            return
-        self.requests_answered += 1
+            log.debug("%s response from node %d failed: %s", what, node, e)
+            return False
+        return True
+
+    def _answer(self, request: ServiceRequest) -> None:
+        node = request.dest_node_id
+        frames = node_info_response_frames(
+            self.nodes[node], self._status(node), source_node_id=node,
+            dest_node_id=request.source_node_id, transfer_id=request.transfer_id,
+            priority=request.priority,
+        )  # fmt: skip
+        if self._send(frames, node, "GetNodeInfo"):
+            self.requests_answered += 1
 
     def stop(self) -> None:
         """Called by the Notifier when it stops."""
@@ -333,6 +476,25 @@ class CanNodeServer(can.Listener):
 
     def __exit__(self, *exc: object) -> None:
         self.shutdown()
+
+
+def sim_esc_node(index: int, node_id: int, thruster: Thruster) -> tuple[NodeInfo, list[NodeParam]]:
+    """What a simulated ESC node tells the bus about itself: its GetNodeInfo (name
+    ``org.ftcap.sim.esc<index>``, a unique ID from it) and its parameters, read-only (the
+    simulator's ESCs are configured by the vessel file, not over the bus): ``CAN_NODE``,
+    ``ESC_INDEX`` (the RawCommand slot it follows), ``ESC_BIDIR`` (1: negative commands
+    reverse it, as an AP_Periph ESC set bidirectional; 0: they are clamped) and the thrust
+    range it maps commands to, ``THR_MAX_N`` and ``THR_MIN_N`` (N)."""
+    name = f"org.ftcap.sim.esc{index}"
+    info = NodeInfo(name, 0, 1, 0, unique_id_for(name, node_id))
+    params = [
+        NodeParam("CAN_NODE", node_id, minimum=1, maximum=127),
+        NodeParam("ESC_INDEX", index, minimum=0, maximum=19),
+        NodeParam("ESC_BIDIR", int(thruster.u_min < 0.0), minimum=0, maximum=1),
+        NodeParam("THR_MAX_N", float(thruster.u_max)),
+        NodeParam("THR_MIN_N", float(thruster.u_min)),
+    ]
+    return info, params
 
 
 def health_for(status: AllocatorStatus) -> Health:

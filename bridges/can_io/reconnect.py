@@ -91,12 +91,15 @@ class ReconnectingBus(can.BusABC):
             time.sleep(max(0.0, wait_s))
             return None, False
         try:
-            return inner.recv(timeout), True  # the backend applied its own filters
+            msg = inner.recv(timeout)
         except (can.CanError, OSError) as e:
             if self._is_shutdown:
                 raise can.CanOperationError(f"{self._name}: bus was shut down") from e
             self._lost(inner, e)
             return None, False
+        if msg is None and inner.state is can.BusState.ERROR:  # a backend gone quiet
+            self._lost(inner, "the backend reports an error state")
+        return msg, True  # the backend applied its own filters
 
     def _current(self) -> can.BusABC | None:
         """The backend, re-opened first if it is down and a retry is due."""
@@ -128,7 +131,7 @@ class ReconnectingBus(can.BusABC):
         self.down_since_s = None
         return inner
 
-    def _lost(self, inner: can.BusABC, why: BaseException) -> None:
+    def _lost(self, inner: can.BusABC, why: BaseException | str) -> None:
         with self._lock:
             if self._inner is not inner:
                 return  # another thread already saw this backend fail

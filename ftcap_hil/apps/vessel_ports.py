@@ -65,6 +65,7 @@ class VesselPorts:
         from bridges.can_io.bus import CanBusError, open_can_bus
         from bridges.can_io.force_map import CurveForceMap, ForceRawMap
         from bridges.can_io.hub import CanHub, parse_channel
+        from bridges.can_io.node import CanNodeServer, sim_esc_node
 
         ids = c.esc_node_ids if c.esc_node_ids is not None else [20 + i for i in range(ths.m)]
         try:
@@ -82,6 +83,12 @@ class VesselPorts:
             self._stack.callback(source.shutdown)
             self.esc_sink = CanEscStatusSink(bus, ids)
             self._stack.callback(self.esc_sink.shutdown)
+            escs = {n: sim_esc_node(i, n, ths.thrusters[i]) for i, n in enumerate(ids)}
+            server = CanNodeServer(
+                bus, {n: info for n, (info, _) in escs.items()}, self.esc_sink.current_status,
+                notifier=source.notifier, params={n: ps for n, (_, ps) in escs.items()},
+            )  # fmt: skip
+            self._stack.callback(server.shutdown)
         except (CanBusError, OSError) as e:
             raise PortError(f"can: {e}") from e
         except (ValueError, TypeError) as e:

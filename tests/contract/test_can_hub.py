@@ -6,6 +6,7 @@ Clients are real ``can.Bus`` objects (interface ``canhub``), the hub runs in-pro
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import socket
@@ -142,18 +143,49 @@ def test_stalled_client_does_not_block_the_others() -> None:
         stalled.close()
 
 
-def test_hub_gone_is_reported_then_silent(hub: CanHub) -> None:
+def test_hub_gone_is_said_once_then_silent(hub: CanHub, caplog: pytest.LogCaptureFixture) -> None:
     bus = CanHubBus(hub.channel)
     try:
-        hub.shutdown()
-        with pytest.raises(can.CanOperationError, match="closed"):
-            bus.recv(2.0)
-        assert bus.recv(0.1) is None
-        with pytest.raises(can.CanOperationError):
+        assert bus.state is can.BusState.ACTIVE
+        with caplog.at_level(logging.WARNING, "bridges.can_io.hub_bus"):
+            hub.shutdown()
+            assert bus.recv(2.0) is None  # wakes on the close, says it, returns quietly
+            assert bus.recv(0.1) is None
+        said = [r for r in caplog.records if "closed the connection" in r.getMessage()]
+        assert len(said) == 1 and said[0].levelno == logging.WARNING
+        assert bus.state is can.BusState.ERROR
+        with pytest.raises(can.CanOperationError, match="gone"):
             bus.send(_msg(0))
     finally:
         bus.shutdown()
         bus.shutdown()  # idempotent
+
+
+def test_a_notifier_outlives_the_hub_without_a_traceback(hub: CanHub) -> None:
+    """A plain python-can client (a Notifier, a listener without on_error): the hub stops
+    under it; its thread must not die with an exception (python-can re-raises it there when
+    no listener handles it, and threading prints the traceback)."""
+    died: list[BaseException | None] = []
+    hook = threading.excepthook
+    threading.excepthook = lambda args: died.append(args.exc_value)
+    bus = can.Bus(interface="canhub", channel=hub.channel)
+    got: list[can.Message] = []
+    notifier = can.Notifier(bus, [got.append], timeout=0.05)
+    try:
+        tx = can.Bus(interface="canhub", channel=hub.channel)
+        tx.send(_msg(1))
+        deadline = time.monotonic() + 5.0
+        while not got and time.monotonic() < deadline:
+            time.sleep(0.01)
+        tx.shutdown()
+        hub.shutdown()
+        time.sleep(0.5)  # several of the Notifier's receive rounds
+        assert got and died == [] and notifier.exception is None
+        assert bus.state is can.BusState.ERROR
+    finally:
+        notifier.stop()
+        bus.shutdown()
+        threading.excepthook = hook
 
 
 def test_shutdown_wakes_a_blocked_receiver(open_bus: BusFactory) -> None:

@@ -6,8 +6,8 @@
 The same fit as the surface presets' (``bench/calibrate_shaft.py``: speed bands through the
 binned 99.5th percentiles, current bands, ``cusum_h`` and ``load_h`` 1.5 x the largest
 healthy CUSUM peaks), on healthy station holds of the vehicle (``ftcap_hil.runtime.
-rov_hold``, mode ``drives``, nothing faulty; with ``--moves`` also the repositionings of
-:data:`MOVES`) in each of :data:`CURRENTS` on the tuning
+rov_hold``, mode ``drives``, nothing faulty, with the repositionings of :data:`MOVES`) in
+each of :data:`CURRENTS` on the tuning
 seeds 1001-1003 (the seed is the drives' telemetry noise and calibration errors; the table
 in docs/vessels.md is judged on seeds 0-4), the diagnosis started at ``SETTLE_S`` once the
 hold has settled, as in the judged runs (started with a hold at rest in a current, its
@@ -15,7 +15,7 @@ speed maps learn the in-flow too slowly: docs/vessels.md).
 Loosened while fitting (no alarm trips, the
 default bands decide what is commanded), so the result does not depend on the values being
 fitted. It prints the ``[diagnosis]`` table for the vehicle file: the committed values are
-exactly what it prints (without ``--moves``: docs/vessels.md says why, with both fits).
+exactly what it prints.
 """
 
 from __future__ import annotations
@@ -65,7 +65,6 @@ def calibrate(
     seeds: Sequence[int] = TUNING_SEEDS,
     seconds: float = 120.0,
     currents: Sequence[tuple[float, float, float]] = CURRENTS,
-    moves: bool = False,
 ) -> dict[str, float]:
     """The fitted ``[diagnosis]`` values, the hours and runs they rest on."""
     vehicle = load_vehicle(vehicle_name)
@@ -80,7 +79,7 @@ def calibrate(
             trace: list[ResidualSample] = []
             hold(vehicle, "drives", seconds=seconds, fault_s=seconds, current_ned=current,
                  seed=seed, diagnosis=loose, trace=trace, settle_s=SETTLE_S,
-                 moves=MOVES if moves else ())  # fmt: skip
+                 moves=MOVES)  # fmt: skip
             traces.append(trace)
     out: dict[str, float] = _surface_fit()(traces, loose.speed_resolution)
     out["hours"] = len(traces) * (seconds - SETTLE_S) / 3600.0  # what was fitted
@@ -93,13 +92,8 @@ def main() -> None:
     ap.add_argument("--vehicle", default="bluerov2-heavy")
     ap.add_argument("--seeds", type=int, nargs="+", default=list(TUNING_SEEDS))
     ap.add_argument("--seconds", type=float, default=120.0)
-    ap.add_argument(
-        "--moves",
-        action="store_true",
-        help="fly the repositionings of MOVES in each hold (not the committed fit)",
-    )
     args = ap.parse_args()
-    out = calibrate(args.vehicle, args.seeds, args.seconds, moves=args.moves)
+    out = calibrate(args.vehicle, args.seeds, args.seconds)
     print(f"# {args.vehicle}: {out['runs']} healthy holds, {out['hours']:.2f} h, seeds "
           f"{' '.join(map(str, args.seeds))}; largest healthy CUSUM {out['peak']:.3g} "
           f"(load {out['load_peak']:.3g})")  # fmt: skip

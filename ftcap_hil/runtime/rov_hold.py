@@ -82,7 +82,7 @@ class _Thrusters:
             self.bank = ThrusterBank(cfg)
             feedback = vehicle.drives.feedback
             self.sensor = FeedbackSensor(type(feedback)(**{**vars(feedback), "seed": seed}), ths.m)
-        self._directions = np.column_stack([t.direction() for t in ths.thrusters])
+        self.directions = np.column_stack([t.direction() for t in ths.thrusters])
 
     def step(
         self, u: FloatArray, truth: Truth, dt_s: float, v_rel: FloatArray, t_end_s: float
@@ -91,7 +91,7 @@ class _Thrusters:
         if self.bank is None:
             return truth.delta * u + truth.f, []
         assert self.sensor is not None
-        out = self.bank.step(u, truth, dt_s, self._directions.T @ v_rel)
+        out = self.bank.step(u, truth, dt_s, self.directions.T @ v_rel)
         reports = [(s.t_delivered_s, s.index, s.speed, s.current_a)
                    for s in self.sensor.step(t_end_s, out)]  # fmt: skip
         return out.produced_mean, reports
@@ -114,6 +114,7 @@ def hold(
     trace: list[ResidualSample] | None = None,
     settle_s: float = 20.0,
     moves: Sequence[tuple[float, Sequence[float]]] = (),
+    tell_inflow: bool = True,
 ) -> HoldResult:
     """One hold at ``depth_m`` (heading north, level) in ``current_ned`` (m/s), thruster
     ``faulty`` (index) meeting ``fault`` (:data:`FAULTS`) at ``fault_s``; ``mode`` one of
@@ -125,7 +126,8 @@ def hold(
     first seconds that the allocation then acts on (docs/vessels.md). ``moves``: (time,
     target pose [n, e, d, roll, pitch, yaw] in m and rad) steps of the target, a pilot's
     repositioning (the calibration flies them; the deviations are measured from the target
-    in force)."""
+    in force). ``tell_inflow``: the diagnosis is told each thruster's axial in-flow from the
+    vehicle's velocity over ground (the navigation's; the current's share it learns)."""
     if mode not in MODES:
         raise ValueError(f"rov hold: mode is one of {MODES}, got {mode!r}")
     if mode == "healthy" and faulty is not None:
@@ -177,8 +179,8 @@ def hold(
                 isolated_s = t - fault_s
         tau_d = ctrl(x[:6], x[6:], target, period_s)
         u = alloc.allocate(tau_d, delta_hat, np.zeros(6), u).u
-        if diag is not None:
-            diag.command(t, u)
+        if diag is not None:  # the in-flow the navigation knows: the vehicle's own velocity
+            diag.command(t, u, thrusters.directions.T @ x[6:9] if tell_inflow else None)
         produced = np.zeros(6)
         for j in range(substeps):
             v_rel = x[6:9] - rotation(*x[3:6]).T @ current

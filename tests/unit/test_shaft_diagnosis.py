@@ -301,3 +301,37 @@ def test_a_speed_predicted_near_zero_bounds_the_thrust_ratio() -> None:
     assert _thrust_ratio(10.0, 1e-160) == RATIO_MAX
     assert _thrust_ratio(1.0, 2.0) == 0.25 and _thrust_ratio(-1.0, 2.0) == 0.0
     assert _thrust_ratio(1.0, 0.0) == 0.0
+
+
+def test_a_torque_drive_is_predicted_with_its_speed_dependent_lag() -> None:
+    """A duty-cycle ESC's shaft (I dn/dt = Q_m - Q(n)) takes T n_top / (2 |n|) to settle:
+    at a tenth of its top speed five times its data sheet's T. The prediction follows the
+    same equation (not a fixed lag): a step from rest to 10 % of the top speed is predicted
+    as the truth steps it, and a speed loop keeps its fixed lag."""
+    from ftcap_hil.core.estimation.shaft_channel import Channel
+    from ftcap_hil.core.estimation.shaft_types import DiagnosisConfig, DriveModel
+    from sim.shaft import DriveKind
+
+    prop = Propeller(diameter_m=0.076, k_t=0.438, k_q=0.0718, drive=DriveKind.TORQUE)
+    full = 36.4
+    bank = ThrusterBank(ThrusterBankConfig.create(1, time_constant_s=0.1, actuator=prop,
+                                                  full_force_n=full))  # fmt: skip
+    d, rho = prop.diameter_m, prop.rho_kgm3
+    model = DriveModel(full, 0.1, True, k_thrust=prop.k_t * rho * d**4,
+                       k_torque=prop.k_q * rho * d**5, speed_loop=False)  # fmt: skip
+    ch = Channel(model, DiagnosisConfig())
+    u = full * 0.01  # 10 % of the top speed
+    ch.set_command(u)
+    truth = Truth(np.ones(1), np.zeros(1))
+    for k in range(1, 21):  # 1 s in 50 ms steps
+        out = bank.step(np.array([u]), truth, 0.05)
+        ch.advance(0.05 * k)
+        assert ch.n_pred[0] == pytest.approx(float(out.speed[0]), rel=0.02, abs=0.02)
+    # at 0.25 s a fixed 0.1 s lag would be at 92 % of the way; the drive is far from it
+    fixed = Channel(dataclasses.replace(model, speed_loop=True), DiagnosisConfig())
+    fixed.set_command(u)
+    fixed.advance(0.25)
+    slow = Channel(model, DiagnosisConfig())
+    slow.set_command(u)
+    slow.advance(0.25)
+    assert fixed.n_pred[0] > 1.3 * slow.n_pred[0]

@@ -126,11 +126,16 @@ class ShaftDiagnoser:
         # fitting the bands on healthy runs (bench/calibrate_shaft.py); None: not kept
         self.trace: list[ResidualSample] | None = None
 
-    def command(self, t_s: float, u: FloatArray) -> None:
-        """The commands ``u`` (m,) N sent at ``t_s``: the prediction moves to them."""
-        for ch, ui in zip(self._ch, np.asarray(u, dtype=np.float64).tolist(), strict=True):
+    def command(self, t_s: float, u: FloatArray, inflow: FloatArray | None = None) -> None:
+        """The commands ``u`` (m,) N sent at ``t_s``: the prediction moves to them.
+        ``inflow`` (m,) m/s: the water's speed through each thruster along its thrust that
+        the navigation knows (the vehicle's own velocity), None: not told (the speed map
+        learns it as it learns a current)."""
+        us = np.asarray(u, dtype=np.float64).tolist()
+        vas = [0.0] * len(us) if inflow is None else np.asarray(inflow, dtype=np.float64).tolist()
+        for ch, ui, va in zip(self._ch, us, vas, strict=True):
             ch.advance(t_s)
-            ch.ref = ch.reference(ui)
+            ch.set_command(ui, va)
 
     def feedback(self, t_received_s: float, index: int, speed: float, current_a: float) -> None:
         """One drive's report (speed rev/s or deflection, current A) received at

@@ -171,7 +171,12 @@ class Channel:
         tc = model.time_constant_s
         self._tcs = (tc, tc / spread, tc * spread)
         self.t_pred = 0.0
-        self.ref = 0.0
+        self.ref = 0.0  # the steady speed the command asks for (in the told in-flow)
+        self.q_ref = 0.0  # a torque drive's: its open-water speed n_0 |n_0| (the motor torque)
+        self.inflow = 0.0  # the told axial in-flow, m/s
+        # a torque drive's speed follows I dn/dt = Q_m - Q(n), its lag ~ T n_top / (2 |n|):
+        # five times the data sheet's at a tenth of the top speed (a T200 at hover)
+        self.torque_drive = model.is_shaft and not model.speed_loop
         self.history: deque[tuple[float, float, float, float]] = deque()  # (t, 3 speeds)
         self.thrust = Cusum()
         self.load = Cusum()
@@ -193,6 +198,7 @@ class Channel:
         self.i_m = self.i_pred = 0.0  # last current: measured, predicted (A)
         self.seen = 0  # commanded samples (the first cal_samples commission the model)
         n_full = abs(self.reference(model.full_force_n))
+        self._inertias = tuple(n_full * t for t in self._tcs)  # I / k_Q per lag, rev s
         # true against data sheet
         self.speed_map = SpeedMap(cfg, n_full, model.is_shaft, offset=not model.speed_loop)
         # the band: bands_rel |n| + bands_res x the telemetry's resolution, never under half
@@ -218,12 +224,26 @@ class Channel:
 
     # --- prediction -------------------------------------------------------------------
 
-    def reference(self, u: float) -> float:
-        """The speed (deflection) a healthy drive settles at for the force ``u`` (N)."""
+    def reference(self, u: float, inflow: float = 0.0) -> float:
+        """The speed (deflection) a healthy drive settles at for the force ``u`` (N), in an
+        axial ``inflow`` (m/s, along the thrust) where a torque drive settles off its
+        open-water speed n_0: its motor torque holds k_Q n_0 |n_0| against the propeller's
+        k_Q (n |n| - |n| V_a c_Q), so n = a + sign(n_0) sqrt(a^2 + n_0^2), a = V_a c_Q / 2.
+        A speed loop holds n_0 whatever the in-flow."""
         m = self.model
         if m.is_shaft:
-            return math.copysign(math.sqrt(abs(u) / m.k_thrust), u)
+            n0 = math.copysign(math.sqrt(abs(u) / m.k_thrust), u)
+            if inflow and n0 and not m.speed_loop:
+                a = 0.5 * inflow * m.inflow_torque
+                return a + math.copysign(math.sqrt(a * a + n0 * n0), n0)
+            return n0
         return u / m.full_force_n
+
+    def set_command(self, u: float, inflow: float = 0.0) -> None:
+        """The command ``u`` (N) sent, in the told axial ``inflow`` (m/s)."""
+        self.ref = self.reference(u, inflow)
+        n0 = self.reference(u)
+        self.q_ref, self.inflow = n0 * abs(n0), inflow
 
     def open_water(self, n: float) -> float:
         """The force (N) a healthy actuator gives at speed (deflection) ``n`` at rest."""
@@ -235,16 +255,32 @@ class Channel:
         h = t_s - self.t_pred
         if h <= 0.0:
             return
-        self.n_pred = [
-            self.ref + (n - self.ref) * (math.exp(-h / tc) if tc > 0.0 else 0.0)
-            for n, tc in zip(self.n_pred, self._tcs, strict=True)
-        ]
+        if self.torque_drive and self._tcs[0] > 0.0:
+            pairs = zip(self.n_pred, self._inertias, strict=True)
+            self.n_pred = [self._torque_drive(n, inertia, h) for n, inertia in pairs]
+        else:
+            self.n_pred = [
+                self.ref + (n - self.ref) * (math.exp(-h / tc) if tc > 0.0 else 0.0)
+                for n, tc in zip(self.n_pred, self._tcs, strict=True)
+            ]
         self.t_pred = t_s
         n0, n1, n2 = self.n_pred
         self.history.append((t_s, n0, n1, n2))
         keep = t_s - max(2.0, 4.0 * self.cfg.latency_s + self.cfg.stuck_window_s)
         while len(self.history) > 2 and self.history[1][0] < keep:
             self.history.popleft()
+
+    def _torque_drive(self, n: float, inertia: float, h: float) -> float:
+        """A torque drive's speed after ``h`` s from ``n``: I dn/dt = Q_m - Q(n) per k_Q,
+        Q(n) = n |n| - |n| V_a c_Q, semi-implicit Euler in sub-steps of a tenth of the
+        fastest lag (the quadratic load at the new speed: stable), as the truth steps it."""
+        c_q = self.model.inflow_torque * self.inflow
+        steps = max(1, math.ceil(h / (0.1 * self._tcs[1])))
+        dt = h / steps
+        for _ in range(steps):
+            drive = self.q_ref + abs(n) * c_q
+            n = (inertia * n + dt * drive) / (inertia + dt * abs(n))
+        return n
 
     def restart(self, t_s: float, speed: float) -> None:
         """The prediction restarted from the measured ``speed`` at ``t_s`` (after a telemetry

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -98,6 +99,8 @@ class NodeParam:
             return False
         if isinstance(value, bool | str):
             return True
+        if not math.isfinite(value):
+            return False  # never a NaN or an infinity into a parameter
         low = self.minimum is None or value >= self.minimum
         return low and (self.maximum is None or value <= self.maximum)
 
@@ -397,7 +400,8 @@ class CanNodeServer(can.Listener):
         transfer = Transfer()
         try:
             transfer.from_frames(frames)
-        except (dronecan.UAVCANException, ValueError, IndexError) as e:
+        # any decoder error: an exception here would end the python-can Notifier's thread
+        except Exception as e:  # noqa: BLE001
             self.bad_requests += 1
             log.debug("malformed service request 0x%08X dropped: %s", can_id, e)
             return
@@ -407,11 +411,11 @@ class CanNodeServer(can.Listener):
         )  # fmt: skip
         if request.service_id == GET_NODE_INFO_ID:
             self._answer(request)
-        elif request.service_id == GET_SET_ID and request.dest_node_id in self.params:
+        elif request.service_id == GET_SET_ID:  # a node without parameters: the empty list
             self._answer_param(request, transfer.payload)
 
     def _answer_param(self, request: ServiceRequest, payload: object) -> None:
-        params = self.params[request.dest_node_id]
+        params = self.params.get(request.dest_node_id, [])
         name = bytes(payload.name).decode("ascii", "replace")  # type: ignore[attr-defined]
         if name:
             param = next((p for p in params if p.name == name), None)

@@ -10,6 +10,7 @@ The client's python-can driver passes ``spin``'s timeout to ``recv`` in millisec
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -27,6 +28,7 @@ from bridges.can_io.hub import CanHub
 from bridges.can_io.node import GET_SET, CanNodeServer, NodeParam, get_set_response
 from ftcap_hil.apps.vessel_ports import VesselPorts
 from ftcap_hil.config.sim import load_config
+from tests.support.polling import spin_until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -53,15 +55,6 @@ def hub() -> Iterator[CanHub]:
             bus.shutdown()
 
 
-def _wait_for(cond: Callable[[], bool], timeout_s: float, spin: Callable[[], None]) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        spin()
-        if cond():
-            return True
-    return cond()
-
-
 class Client:
     """A ``dronecan`` node (id 100) asking one question at a time."""
 
@@ -72,7 +65,7 @@ class Client:
     def ask(self, request: Any, node_id: int, spin: Callable[[], None]) -> Any:
         got: list[Any] = []
         self.node.request(request, node_id, lambda e: got.append(e), timeout=2.0)
-        assert _wait_for(lambda: bool(got), 5.0, spin), "no answer"
+        assert spin_until(lambda: bool(got), 5.0, spin), "no answer"
         assert got[0] is not None, "request timed out"
         return got[0].response
 
@@ -105,7 +98,7 @@ def test_sim_escs_identify_themselves_and_list_their_parameters(hub: CanHub) -> 
             return False
 
     try:
-        assert _wait_for(lambda: all(known(n) for n in ids), 20.0, spin), monitor.get_all_node_id()
+        assert spin_until(lambda: all(known(n) for n in ids), 20.0, spin), monitor.get_all_node_id()
         for i, n in enumerate(ids):
             assert bytes(monitor.get(n).info.name).decode() == f"org.ftcap.sim.esc{i}"
         # the GUI tool's listing: index 0, 1, ... until the empty answer
@@ -142,14 +135,15 @@ def test_a_writable_parameter_is_set_within_its_bounds_and_bad_requests_are_drop
     bus = open_can_bus("canhub", hub.channel)
     gain = NodeParam("GAIN", 0.5, minimum=0.0, maximum=1.0, writable=True)
     flag = NodeParam("ENABLED", True, writable=True)
-    server = CanNodeServer(bus, {30: _info()}, _status, params={30: [gain, flag]})
+    server = CanNodeServer(bus, {30: _info(), 31: _info()}, _status, params={30: [gain, flag]})
     client = Client(hub.channel)
 
     def spin() -> None:
         client.node.spin(0.05)
 
     try:
-        for asked, kept in ((0.8, 0.8), (1.5, 0.8), (3, 0.8)):  # in bounds; out; wrong type
+        # in bounds; out; wrong type; not a number
+        for asked, kept in ((0.8, 0.8), (1.5, 0.8), (3, 0.8), (math.nan, 0.8)):
             request = GET_SET.Request(name="GAIN")
             if isinstance(asked, int):
                 request.value.integer_value = asked
@@ -158,7 +152,9 @@ def test_a_writable_parameter_is_set_within_its_bounds_and_bad_requests_are_drop
             r = client.ask(request, 30, spin)
             assert _value(r.value) == pytest.approx(kept)
             assert _value(r.default_value) == pytest.approx(0.5)
-        assert gain.value == pytest.approx(0.8) and server.sets_refused == 2
+        assert gain.value == pytest.approx(0.8) and server.sets_refused == 3
+        # a node without parameters lists none (the empty answer, not silence)
+        assert bytes(client.ask(GET_SET.Request(index=0), 31, spin).name) == b""
         request = GET_SET.Request(index=1)
         request.value.boolean_value = 0
         assert _value(client.ask(request, 30, spin).value) == 0 and flag.value is False
@@ -175,7 +171,7 @@ def test_a_writable_parameter_is_set_within_its_bounds_and_bad_requests_are_drop
                 raw.send(can.Message(arbitration_id=f.message_id, data=bytes(f.bytes),
                                      is_extended_id=True))  # fmt: skip
             # (the client would raise on these frames too: it is not spun from here on)
-            assert _wait_for(lambda: server.bad_requests == 1, 5.0, lambda: time.sleep(0.01))
+            assert spin_until(lambda: server.bad_requests == 1, 5.0, lambda: time.sleep(0.01))
         finally:
             raw.shutdown()
         assert server.params_answered == answered

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 
 import can
 import dronecan
@@ -36,6 +36,7 @@ from bridges.can_io.hub import CanHub
 from bridges.can_io.node import CanNodeServer, NodeInfo, health_for, mode_for, unique_id_for
 from ftcap_hil.core.status import AllocatorStatus
 from ftcap_hil.ports.mailbox import Mailbox
+from tests.support.polling import spin_until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -57,15 +58,6 @@ class Recording(Mailbox[tuple[int, ...]]):
 
 def _esc_info(i: int) -> NodeInfo:
     return NodeInfo(f"org.ftcap.sim.esc{i}", 0, 1, 0, unique_id_for("esc", 20 + i))
-
-
-def _wait_for(cond: Callable[[], bool], timeout_s: float, spin: Callable[[], None]) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        spin()
-        if cond():
-            return True
-    return cond()
 
 
 @pytest.fixture
@@ -112,7 +104,7 @@ def test_dronecan_node_monitor_lists_allocator_and_escs(hub: CanHub) -> None:
             return None
 
     try:
-        found = _wait_for(lambda: all(info(n) for n in (10, 20, 21)), 20, spin)
+        found = spin_until(lambda: all(info(n) for n in (10, 20, 21)), 20, spin)
         assert found, f"monitor sees {monitor.get_all_node_id()}"
         info = monitor.get(10).info
         assert bytes(info.name).decode() == "org.ftcap.allocator"
@@ -126,10 +118,10 @@ def test_dronecan_node_monitor_lists_allocator_and_escs(hub: CanHub) -> None:
 
         flagged = AllocatorStatus(cycle=5, delta_hat=(1.0, 0.2), faulty=(False, True))
         sink.set_status(health_for(flagged), mode_for(flagged))
-        assert _wait_for(lambda: monitor.get(10).status.health == Health.WARNING, 5, spin)
+        assert spin_until(lambda: monitor.get(10).status.health == Health.WARNING, 5, spin)
         degraded = AllocatorStatus(cycle=6, delta_hat=(1.0, 1.0), degraded=True)
         sink.set_status(health_for(degraded), mode_for(degraded))
-        assert _wait_for(lambda: monitor.get(10).status.health == Health.ERROR, 5, spin)
+        assert spin_until(lambda: monitor.get(10).status.health == Health.ERROR, 5, spin)
         assert alloc_server.conflicts == 0 and esc_server.conflicts == 0  # none of this is one
         assert commands.conflict is not None and commands.conflict.conflicts == 0
     finally:

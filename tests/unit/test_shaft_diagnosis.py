@@ -335,3 +335,8 @@ def test_a_torque_drive_is_predicted_with_its_speed_dependent_lag() -> None:
     slow.set_command(u)
     slow.advance(0.25)
     assert fixed.n_pred[0] > 1.3 * slow.n_pred[0]
+    # the first command after a long pause (a process's monotonic clock): settled at once
+    late = Channel(model, DiagnosisConfig())
+    late.set_command(u)
+    late.advance(1e5)
+    assert late.n_pred == pytest.approx([late.ref] * 3)

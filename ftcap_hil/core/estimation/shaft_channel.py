@@ -274,8 +274,10 @@ class Channel:
         """A torque drive's speed after ``h`` s from ``n``: I dn/dt = Q_m - Q(n) per k_Q,
         Q(n) = n |n| - |n| V_a c_Q, semi-implicit Euler in sub-steps of a tenth of the
         fastest lag (the quadratic load at the new speed: stable), as the truth steps it."""
+        if h >= 100.0 * self._tcs[2]:  # a long pause (the first command on a process's
+            return self.ref  # monotonic clock): settled at the steady speed, whatever the lag
         c_q = self.model.inflow_torque * self.inflow
-        steps = max(1, math.ceil(h / (0.1 * self._tcs[1])))
+        steps = max(1, math.ceil(h / (0.1 * self._tcs[1])))  # at most 2250
         dt = h / steps
         for _ in range(steps):
             drive = self.q_ref + abs(n) * c_q

@@ -192,6 +192,18 @@ def node_info_response_frames(
     hw.major, hw.minor = info.hardware_major, info.hardware_minor
     hw.unique_id = list(info.unique_id)
     response.name = info.name
+    return service_response_frames(
+        response, source_node_id=source_node_id, dest_node_id=dest_node_id,
+        transfer_id=transfer_id, priority=priority,
+    )  # fmt: skip
+
+
+def service_response_frames(
+    response: object, *, source_node_id: int, dest_node_id: int, transfer_id: int,
+    priority: int = PRIORITY_LOWEST,
+) -> list[tuple[int, bytes]]:  # fmt: skip
+    """(CAN ID, data) of the frames of one service ``response`` (a dronecan Response), in
+    bus order."""
     transfer = Transfer(
         transfer_id=transfer_id & 0x1F,
         source_node_id=check_node_id("source_node_id", source_node_id),
@@ -429,13 +441,11 @@ class CanNodeServer(can.Listener):
             else:
                 self.sets_refused += 1
                 log.debug("node %d: set %s = %r refused", request.dest_node_id, param.name, value)
-        transfer = Transfer(
-            transfer_id=request.transfer_id, source_node_id=request.dest_node_id,
-            dest_node_id=request.source_node_id, payload=get_set_response(param),
-            transfer_priority=request.priority, request_not_response=False,
-            service_not_message=True,
+        frames = service_response_frames(
+            get_set_response(param), source_node_id=request.dest_node_id,
+            dest_node_id=request.source_node_id, transfer_id=request.transfer_id,
+            priority=request.priority,
         )  # fmt: skip
-        frames = [(f.message_id, bytes(f.bytes)) for f in transfer.to_frames()]
         if self._send(frames, request.dest_node_id, "param.GetSet"):
             self.params_answered += 1
 

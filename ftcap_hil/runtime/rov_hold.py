@@ -21,6 +21,7 @@ thrust). The allocator's effectiveness estimate delta_hat is, per mode:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -71,7 +72,6 @@ class _Thrusters:
 
     def __init__(self, vehicle: UnderwaterVehicle, seed: int) -> None:
         ths = vehicle.thrusters
-        self.m = ths.m
         self.bank: ThrusterBank | None = None
         self.sensor: FeedbackSensor | None = None
         if vehicle.drives is not None:
@@ -80,8 +80,8 @@ class _Thrusters:
                 actuator=vehicle.drives.actuators, full_force_n=ths.u_max.tolist(), seed=seed,
             )  # fmt: skip
             self.bank = ThrusterBank(cfg)
-            feedback = vehicle.drives.feedback
-            self.sensor = FeedbackSensor(type(feedback)(**{**vars(feedback), "seed": seed}), ths.m)
+            feedback = dataclasses.replace(vehicle.drives.feedback, seed=seed)
+            self.sensor = FeedbackSensor(feedback, ths.m)
         self.directions = np.column_stack([t.direction() for t in ths.thrusters])
 
     def step(
@@ -114,7 +114,6 @@ def hold(
     trace: list[ResidualSample] | None = None,
     settle_s: float = 20.0,
     moves: Sequence[tuple[float, Sequence[float]]] = (),
-    tell_inflow: bool = True,
 ) -> HoldResult:
     """One hold at ``depth_m`` (heading north, level) in ``current_ned`` (m/s), thruster
     ``faulty`` (index) meeting ``fault`` (:data:`FAULTS`) at ``fault_s``; ``mode`` one of
@@ -126,8 +125,8 @@ def hold(
     first seconds that the allocation then acts on (docs/vessels.md). ``moves``: (time,
     target pose [n, e, d, roll, pitch, yaw] in m and rad) steps of the target, a pilot's
     repositioning (the calibration flies them; the deviations are measured from the target
-    in force). ``tell_inflow``: the diagnosis is told each thruster's axial in-flow from the
-    vehicle's velocity over ground (the navigation's; the current's share it learns)."""
+    in force). The diagnosis is told each thruster's axial in-flow from the vehicle's
+    velocity over ground (the navigation's; the current's share it learns)."""
     if mode not in MODES:
         raise ValueError(f"rov hold: mode is one of {MODES}, got {mode!r}")
     if mode == "healthy" and faulty is not None:
@@ -180,7 +179,7 @@ def hold(
         tau_d = ctrl(x[:6], x[6:], target, period_s)
         u = alloc.allocate(tau_d, delta_hat, np.zeros(6), u).u
         if diag is not None:  # the in-flow the navigation knows: the vehicle's own velocity
-            diag.command(t, u, thrusters.directions.T @ x[6:9] if tell_inflow else None)
+            diag.command(t, u, thrusters.directions.T @ x[6:9])
         produced = np.zeros(6)
         for j in range(substeps):
             v_rel = x[6:9] - rotation(*x[3:6]).T @ current

@@ -224,26 +224,24 @@ class Channel:
 
     # --- prediction -------------------------------------------------------------------
 
-    def reference(self, u: float, inflow: float = 0.0) -> float:
-        """The speed (deflection) a healthy drive settles at for the force ``u`` (N), in an
-        axial ``inflow`` (m/s, along the thrust) where a torque drive settles off its
-        open-water speed n_0: its motor torque holds k_Q n_0 |n_0| against the propeller's
-        k_Q (n |n| - |n| V_a c_Q), so n = a + sign(n_0) sqrt(a^2 + n_0^2), a = V_a c_Q / 2.
-        A speed loop holds n_0 whatever the in-flow."""
+    def reference(self, u: float) -> float:
+        """The speed (deflection) a healthy drive settles at for the force ``u`` (N) in
+        open water."""
         m = self.model
         if m.is_shaft:
-            n0 = math.copysign(math.sqrt(abs(u) / m.k_thrust), u)
-            if inflow and n0 and not m.speed_loop:
-                a = 0.5 * inflow * m.inflow_torque
-                return a + math.copysign(math.sqrt(a * a + n0 * n0), n0)
-            return n0
+            return math.copysign(math.sqrt(abs(u) / m.k_thrust), u)
         return u / m.full_force_n
 
     def set_command(self, u: float, inflow: float = 0.0) -> None:
-        """The command ``u`` (N) sent, in the told axial ``inflow`` (m/s)."""
-        self.ref = self.reference(u, inflow)
+        """The command ``u`` (N) sent, in the told axial ``inflow`` (m/s, along the thrust).
+        A torque drive settles off its open-water speed n_0 there: its motor torque holds
+        k_Q n_0 |n_0| against the propeller's k_Q (n |n| - |n| V_a c_Q), so
+        n = a + sign(n_0) sqrt(a^2 + n_0^2), a = V_a c_Q / 2; a speed loop holds n_0."""
         n0 = self.reference(u)
-        self.q_ref, self.inflow = n0 * abs(n0), inflow
+        self.ref, self.q_ref, self.inflow = n0, n0 * abs(n0), inflow
+        if inflow and n0 and self.torque_drive:
+            a = 0.5 * inflow * self.model.inflow_torque
+            self.ref = a + math.copysign(math.sqrt(a * a + n0 * n0), n0)
 
     def open_water(self, n: float) -> float:
         """The force (N) a healthy actuator gives at speed (deflection) ``n`` at rest."""

@@ -46,10 +46,6 @@ class HoldController6DOF:
         self._i_limit = integral_limit * model.weight_n
         self._integral = np.zeros(3)
 
-    def reset(self) -> None:
-        """Forget the integral (a new run)."""
-        self._integral = np.zeros(3)
-
     def __call__(
         self, eta: FloatArray, nu: FloatArray, eta_d: FloatArray, dt_s: float
     ) -> FloatArray:

@@ -260,7 +260,3 @@ class Vehicle6DOF:
         k3 = self.derivative(x + 0.5 * dt_s * k2, tau, current_ned)
         k4 = self.derivative(x + dt_s * k3, tau, current_ned)
         return x + (dt_s / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-    def kinetic_energy(self, nu: FloatArray) -> float:
-        """1/2 nu^T M nu (J) in still water: what damping alone may only take away."""
-        return 0.5 * float(nu @ self.mass_matrix @ nu)

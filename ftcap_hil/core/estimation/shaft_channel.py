@@ -35,6 +35,53 @@ class Cusum:
         self.low = self.high = 0.0
 
 
+def kalman3(
+    theta: list[float], cov: list[float], phi: tuple[float, float, float], residual: float,
+    noise_var: float, clip_z: float,
+) -> None:  # fmt: skip
+    """One measurement update of a three-coefficient linear Kalman filter, in place, in
+    floats (the maps learn on every telemetry sample: numpy's per-call cost on 3-vectors
+    was a third of the offline loop; :func:`kalman3_reference` is the same algebra in numpy,
+    the reference a test holds this to). ``cov`` is the 3 x 3 covariance row by row, ``phi``
+    the regressor, ``residual`` the measurement's innovation before clipping, which is
+    clipped to ``clip_z`` of its spread."""
+    p0, p1, p2 = phi
+    a00, a01, a02, a10, a11, a12, a20, a21, a22 = cov
+    g0 = a00 * p0 + a01 * p1 + a02 * p2  # P phi
+    g1 = a10 * p0 + a11 * p1 + a12 * p2
+    g2 = a20 * p0 + a21 * p1 + a22 * p2
+    h0 = p0 * a00 + p1 * a10 + p2 * a20  # phi P
+    h1 = p0 * a01 + p1 * a11 + p2 * a21
+    h2 = p0 * a02 + p1 * a12 + p2 * a22
+    s = h0 * p0 + h1 * p1 + h2 * p2 + noise_var
+    k0, k1, k2 = g0 / s, g1 / s, g2 / s
+    bound = clip_z * math.sqrt(s)
+    r = min(max(residual, -bound), bound)
+    theta[0] += k0 * r
+    theta[1] += k1 * r
+    theta[2] += k2 * r
+    cov[:] = (
+        a00 - k0 * h0, a01 - k0 * h1, a02 - k0 * h2,
+        a10 - k1 * h0, a11 - k1 * h1, a12 - k1 * h2,
+        a20 - k2 * h0, a21 - k2 * h1, a22 - k2 * h2,
+    )  # fmt: skip
+
+
+def kalman3_reference(
+    theta: list[float], cov: list[float], phi: tuple[float, float, float], residual: float,
+    noise_var: float, clip_z: float,
+) -> None:  # fmt: skip
+    """:func:`kalman3` in numpy (the algebra as written: the reference)."""
+    t, p, f = np.array(theta), np.array(cov).reshape(3, 3), np.array(phi)
+    s = float(f @ p @ f) + noise_var
+    gain = p @ f / s
+    bound = clip_z * math.sqrt(s)
+    t = t + gain * min(max(residual, -bound), bound)
+    p = p - np.outer(gain, f @ p)
+    theta[:] = t.tolist()
+    cov[:] = p.ravel().tolist()
+
+
 class LoadModel:
     """The current a shaft draws, learnt on healthy data as a small Kalman filter of three
     coefficients (a, c, o) on the data sheet's full-speed load L::
@@ -44,46 +91,53 @@ class LoadModel:
     ``a`` is the current sense's scale (within ``cal_limit`` of 1), ``c`` the in-flow's share
     (the water's axial speed through the propeller, unknown to the allocator: current,
     vessel speed; within +-0.3), ``o`` the current sense's offset (its drift). Each walks by
-    its prior's size over ``cal_tau_s``; the first samples commission them from the prior."""
+    its prior's size over ``cal_tau_s``; the first samples commission them from the prior.
+    ``theta`` and ``P`` (3 x 3, row by row) are lists of floats: :func:`kalman3`."""
 
     def __init__(self, model: DriveModel, cfg: DiagnosisConfig, n_full: float) -> None:
         self.cfg, self.idle_a = cfg, model.idle_a
         self.n_full = max(n_full, 1e-12)
         self.load_a = 2.0 * math.pi * model.k_torque * self.n_full**3 / model.watts_per_amp
-        self.theta = np.array([1.0, 0.0, 0.0])
+        self.theta = [1.0, 0.0, 0.0]
         noise = cfg.current_abs / max(self.load_a, 1e-12)
         self.R = noise * noise
-        self._prior = np.array([cfg.cal_limit**2, 0.1**2, 4.0 * self.R])  # offset: 2 bands
-        self.P = np.diag(self._prior)
+        self._prior = (cfg.cal_limit**2, 0.1**2, 4.0 * self.R)  # offset: 2 bands
+        self.P = _diagonal(self._prior)
 
-    def _phi(self, n: float) -> np.ndarray:
+    def _phi(self, n: float) -> tuple[float, float, float]:
         nu = abs(n) / self.n_full
-        return np.array([nu**3, math.copysign(nu * nu, n), 1.0])
+        return nu**3, math.copysign(nu * nu, n), 1.0
 
     def current(self, n: float) -> float:
         """The current (A) a healthy shaft at speed ``n`` draws."""
-        return self.idle_a + self.load_a * float(self._phi(n) @ self.theta)
+        f0, f1, f2 = self._phi(n)
+        a, c, o = self.theta
+        return self.idle_a + self.load_a * (f0 * a + f1 * c + f2 * o)
 
     def learn(self, gap_s: float, n: float, current_a: float) -> None:
         """One healthy, commanded sample (a static map: steady or not): the coefficients
         move towards it."""
-        cfg = self.cfg
+        cfg, P = self.cfg, self.P
         if cfg.cal_tau_s > 0.0:
             walk = gap_s / cfg.cal_tau_s
-            self.P += np.diag(self._prior * walk)
+            P[0] += self._prior[0] * walk
+            P[4] += self._prior[1] * walk
+            P[8] += self._prior[2] * walk
         phi = self._phi(n)
         y = (current_a - self.idle_a) / self.load_a
-        s = float(phi @ self.P @ phi) + self.R
-        gain = self.P @ phi / s
+        a, c, o = self.theta
         # innovations clipped to clear_z of their spread: a fault is learnt no faster than
         # the coefficients may walk, a bias of the prior is learnt all the same
-        bound = self.cfg.clear_z * math.sqrt(s)
-        innovation = min(max(y - float(phi @ self.theta), -bound), bound)
-        self.theta = self.theta + gain * innovation
-        self.P = self.P - np.outer(gain, phi @ self.P)
+        kalman3(self.theta, P, phi, y - (phi[0] * a + phi[1] * c + phi[2] * o), self.R,
+                cfg.clear_z)  # fmt: skip
         lo, hi = 1.0 - cfg.cal_limit, 1.0 + cfg.cal_limit
-        a, c, o = self.theta.tolist()
-        self.theta = np.array([min(max(a, lo), hi), min(max(c, -0.3), 0.3), o])
+        a, c, o = self.theta
+        self.theta = [min(max(a, lo), hi), min(max(c, -0.3), 0.3), o]
+
+
+def _diagonal(d: tuple[float, float, float]) -> list[float]:
+    """A 3 x 3 diagonal matrix, row by row."""
+    return [d[0], 0.0, 0.0, 0.0, d[1], 0.0, 0.0, 0.0, d[2]]
 
 
 class SpeedMap:
@@ -114,31 +168,36 @@ class SpeedMap:
     ) -> None:  # fmt: skip
         self.cfg = cfg
         self.n_full = max(n_full, 1e-12)
-        self.theta = np.array([1.0, 1.0, 0.0])
+        self.theta = [1.0, 1.0, 0.0]
         inflow = 0.02 * self.n_full if offset else 0.0
-        prior = [cfg.cal_limit**2, cfg.cal_limit**2, inflow**2]
-        self._prior = np.array(prior if learns else [0.0, 0.0, 0.0])
-        self.P = np.diag(self._prior)
+        prior = (cfg.cal_limit**2, cfg.cal_limit**2, inflow**2)
+        self._prior = prior if learns else (0.0, 0.0, 0.0)
+        self.P = _diagonal(self._prior)
         self.learns = learns
-
-    @staticmethod
-    def _phi(x: float) -> np.ndarray:
-        return np.array([max(x, 0.0), min(x, 0.0), 1.0])
 
     def speed(self, x: float) -> float:
         """The healthy speed for the data-sheet speed ``x`` (0 at 0: no command, no test)."""
-        return float(self._phi(x) @ self.theta) if x else 0.0
+        if not x:
+            return 0.0
+        s_ahead, s_astern, o = self.theta
+        return (s_ahead * x if x > 0.0 else s_astern * x) + o
 
     def data_sheet(self, n: float) -> float:
         """The data-sheet speed that maps to the measured ``n`` (the inverse of speed)."""
-        s_ahead, s_astern, o = (float(v) for v in self.theta)
+        s_ahead, s_astern, o = self.theta
         x = n - o
         return x / (s_ahead if x >= 0.0 else s_astern)
 
     def spread(self, x: float) -> float:
-        """The map's standard deviation at ``x`` (rev/s)."""
-        phi = self._phi(x)
-        return math.sqrt(max(float(phi @ self.P @ phi), 0.0))
+        """The map's standard deviation at ``x`` (rev/s): phi P phi, phi = (x+, x-, 1)."""
+        P = self.P
+        if x > 0.0:  # phi = (x, 0, 1)
+            var = P[0] * x * x + (P[2] + P[6]) * x + P[8]
+        elif x < 0.0:  # phi = (0, x, 1)
+            var = P[4] * x * x + (P[5] + P[7]) * x + P[8]
+        else:
+            var = P[8]
+        return math.sqrt(max(var, 0.0))
 
     def learn(self, gap_s: float, x: float, error: float, sigma: float) -> None:
         """One healthy, commanded sample: data-sheet speed ``x``, the measured speed's
@@ -146,17 +205,12 @@ class SpeedMap:
         cfg = self.cfg
         if cfg.cal_tau_s <= 0.0 or x == 0.0 or not self.learns:
             return
-        self.P[2, 2] += self._prior[2] * (gap_s / cfg.cal_tau_s)  # the in-flow moves
-        phi = self._phi(x)
-        var = float(phi @ self.P @ phi) + sigma * sigma
-        gain = self.P @ phi / var
-        bound = cfg.clear_z * math.sqrt(var)
-        innovation = min(max(error, -bound), bound)
-        self.theta = self.theta + gain * innovation
-        self.P = self.P - np.outer(gain, phi @ self.P)
+        self.P[8] += self._prior[2] * (gap_s / cfg.cal_tau_s)  # the in-flow moves
+        phi = (max(x, 0.0), min(x, 0.0), 1.0)
+        kalman3(self.theta, self.P, phi, error, sigma * sigma, cfg.clear_z)
         lo, hi, off = 1.0 - cfg.cal_limit, 1.0 + cfg.cal_limit, 0.1 * self.n_full
-        a, b, o = self.theta.tolist()
-        self.theta = np.array([min(max(a, lo), hi), min(max(b, lo), hi), min(max(o, -off), off)])
+        a, b, o = self.theta
+        self.theta = [min(max(a, lo), hi), min(max(b, lo), hi), min(max(o, -off), off)]
 
 
 class Channel:

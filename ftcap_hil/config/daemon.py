@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from ftcap_hil.config.bridges import PortSettings, allocator_ports_from
-from ftcap_hil.config.live_scenario import fit_node_ids
+from ftcap_hil.config.live_scenario import fit_node_ids, wrench_bound
 from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.config.scenario_tables import core_config_from
 from ftcap_hil.config.table_dataclass import defaults_of
@@ -167,6 +167,17 @@ def told_by_scenario(daemon: DaemonConfig, sc: Scenario, given: dict[str, Any]) 
     )
 
 
+def _sized_to(ports: PortSettings, sc: Scenario) -> PortSettings:
+    """The setpoint bounds of the file's vessel widened to the scenario's vessel
+    (:func:`~ftcap_hil.config.live_scenario.wrench_bound`; no bound stays none)."""
+    mav, zen = ports.mavlink, ports.zenoh
+    if mav is not None and mav.wrench_limit is not None:
+        mav = replace(mav, wrench_limit=wrench_bound(sc, mav.wrench_limit))
+    if zen is not None and zen.wrench_limit is not None:
+        zen = replace(zen, wrench_limit=wrench_bound(sc, zen.wrench_limit))
+    return replace(ports, mavlink=mav, zenoh=zen)
+
+
 def load_daemon_config(
     path: str | Path | None, overrides: list[str] | None = None, scenario: str | None = None
 ) -> LoadedConfig:
@@ -182,6 +193,8 @@ def load_daemon_config(
             daemon = told_by_scenario(daemon, sc, dict(doc.data.get("daemon", {})))
             fit_node_ids(doc.data, daemon.thrusters.m, doc.source)
         ports = allocator_ports_from(root, daemon.thrusters.m)
+        if sc is not None:
+            ports = _sized_to(ports, sc)
     # A hold shorter than the loop's deadline period would zero the thrusters between
     # every two cycles: it lasts at least HOLD_PERIODS of them.
     hold = max(ports.can.esc_hold_s, HOLD_PERIODS / daemon.rate_hz)

@@ -37,6 +37,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from ftcap_hil.config.live_scenario import wrench_bound
 from ftcap_hil.config.realistic import anchor_preset, is_realistic, parse_realistic
 from ftcap_hil.config.scenario import SHIPPED
 from ftcap_hil.config.scenario_tables import REPLACEABLE, scenario_from
@@ -174,7 +175,9 @@ def scenario_mission(name_or_path: str | Path, overrides: list[str] | None = Non
     path = Path(name_or_path)
     ref = str(path.resolve()) if path.is_file() else str(name_or_path)
     data = {"mission": {"scenario": ref}, "gcs": {"vessel_clock": True}}
-    return parse_mission(apply_overrides(data, overrides or []), f"--scenario {name_or_path}")
+    mission = parse_mission(apply_overrides(data, overrides or []), f"--scenario {name_or_path}")
+    limit = wrench_bound(mission.scenario, mission.gcs.wrench_limit)  # the allocator's
+    return replace(mission, gcs=replace(mission.gcs, wrench_limit=limit))
 
 
 def load_mission(name_or_path: str | Path, overrides: list[str] | None = None) -> Mission:

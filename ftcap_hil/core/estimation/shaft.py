@@ -291,13 +291,20 @@ class ShaftDiagnoser:
     @staticmethod
     def _moves(ch: Channel) -> tuple[float, float, float]:
         """Over ``stuck_window_s``: how far the prediction moved, how far the measured speed
-        did, and the prediction's size (0, 0, 1 with fewer than three samples)."""
-        if len(ch.recent) < 3:
+        did, and the prediction's size (0, 0, 1 with fewer than three samples). Kept while
+        the window holds the same samples (a sample asks for it two or three times)."""
+        recent = ch.recent
+        if len(recent) < 3:
             return 0.0, 0.0, 1.0
-        speeds = [r[1] for r in ch.recent]
-        preds = [r[2] for r in ch.recent]
-        scale = max(abs(p) for p in preds) or 1.0
-        return max(preds) - min(preds), max(speeds) - min(speeds), scale
+        key = (len(recent), recent[0][0], recent[-1][0])
+        if ch.moves_key == key:
+            return ch.moves
+        speeds = [r[1] for r in recent]
+        preds = [r[2] for r in recent]
+        scale = max(max(preds), -min(preds)) or 1.0
+        ch.moves_key = key
+        ch.moves = (max(preds) - min(preds), max(speeds) - min(speeds), scale)
+        return ch.moves
 
     @staticmethod
     def _held(moved: float, held: float, scale: float) -> bool:

@@ -23,7 +23,7 @@ def test_the_readme_carries_the_committed_campaigns_headline() -> None:
 def test_the_committed_summary_is_the_sweeps_campaigns_whole_run() -> None:
     summary = SUMMARY.read_text()
     assert summary.startswith("# Campaign sweeps\n")
-    assert "848 runs (848 ok, 0 failed)" in summary
+    assert "2120 runs (2120 ok, 0 failed)" in summary
     assert "thresholds tuned on seeds 1001-1003 (disjoint)" in summary
     for png in ("sweep_map", "isolation_by_kind", "dev_cap_by_scenario"):
         assert (SUMMARY.parent / f"{png}.png").stat().st_size > 10_000, png

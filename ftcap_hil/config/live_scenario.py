@@ -23,9 +23,8 @@ import logging
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ftcap_hil.config.scenario import load_scenario
+from ftcap_hil.core.estimation.config import wrench_scale
 from ftcap_hil.core.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -56,10 +55,10 @@ SETPOINT_HEADROOM = 100.0
 
 def wrench_bound(sc: Scenario, given: tuple[float, ...]) -> tuple[float, float, float]:
     """Per component the larger of ``given`` (a file's bound) and SETPOINT_HEADROOM times
-    the scenario vessel's whole capacity on that axis, sum_i |B_ji| max(|u_min_i|, |u_max_i|)
-    (module docstring)."""
+    the scenario vessel's whole capacity on that axis (:func:`wrench_scale`, the estimator's
+    axis scale; module docstring)."""
     th = sc.thrusters
-    capacity = np.abs(sc.B) @ np.maximum(np.abs(th.u_min), np.abs(th.u_max))
+    capacity = wrench_scale(sc.B, th.u_min, th.u_max)
     x, y, n = (
         max(float(g), SETPOINT_HEADROOM * float(c)) for g, c in zip(given, capacity, strict=True)
     )

@@ -171,6 +171,7 @@ class FtcapCore:
         self._silent_known = np.zeros(self.m, dtype=bool)  # judged since its drive fell silent
         self._spoken = np.zeros(self.m, dtype=bool)  # its drive has reported at least once
         self._was_silent = np.zeros(self.m, dtype=bool)  # had spoken, silent at the last cycle
+        self._shown = np.zeros(self.m, dtype=bool)  # its drive showed an actionable loss
         self._period_s = period_s
         self._estimates = self.config.mode.estimates
         # Pure functions of their inputs, kept while those are the very same objects (a
@@ -301,16 +302,34 @@ class FtcapCore:
         self, feedback: Sequence[DriveReport], t_s: float, sampled: bool, u_sample: FloatArray
     ) -> tuple[ShaftVerdict, FloatArray]:
         """The drives' verdict at ``t_s`` after ``feedback``; on a new estimation sample the
-        motion filter's input: the thrust the measured speeds implied over the interval
-        where a drive reported, the (lagged) command elsewhere."""
+        motion filter's input: the (lagged) command times the effectiveness the drive shows
+        (1 where it shows nothing the allocator acts on), as the allocation multiplies the
+        motion's estimate by the drive's: the motion judges the whole thruster where the
+        drive sees nothing wrong (a weak motor or a hull loss its test misses, as with no
+        drives) and the rest of a loss the drive has named (its shown effectiveness off
+        the truth); a stuck shaft's input is the thrust its frozen speed implies (its held
+        force is compensated apart). Where a drive turns actionable, what the motion learnt
+        of its thruster is dropped: the drive's verdict explains that loss from then on.
+
+        Not the measured speeds' thrust where the drive is healthy: on a thruster turning
+        as commanded it adds the data sheet's K_T error and the telemetry's latency to the
+        motion's input (CyberShip II, a drawn model error: the starboard propeller's
+        estimate 0.55 against 0.89 on the command, a false alarm held for the whole run)."""
         assert self.shaft is not None
         for report in feedback:
             self.shaft.report(report)
         verdict = self.shaft.verdict(t_s)
+        shown = verdict.fresh & verdict.actionable
+        turned = shown & ~self._shown
+        self._shown = shown
+        if True in turned.tolist() and isinstance(self.stage, KalmanStage):
+            self.stage.forget(turned)
         if sampled:
             implied = self.shaft.take_thrust_means()
-            implied = implied * verdict.load_factor
-            u_sample = np.where(np.isfinite(implied) & verdict.fresh, implied, u_sample)
+            u_sample = u_sample * np.where(shown, verdict.delta, 1.0)
+            stuck = shown & verdict.stuck & np.isfinite(implied)
+            if True in stuck.tolist():
+                u_sample = np.where(stuck, implied, u_sample)
         return verdict, u_sample
 
     def _with_drives(

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ftcap_hil.core.estimation.config import Estimate
-from ftcap_hil.core.estimation.shaft import Hypothesis, ShaftVerdict
+from ftcap_hil.core.estimation.shaft import ShaftVerdict
 from ftcap_hil.core.estimation.stages import StageOutput
 from ftcap_hil.core.frozen import fast_init
 from ftcap_hil.core.messages import BoolArray, FloatArray
@@ -162,7 +162,7 @@ def _with_shaft(
     if B is None:
         raise ValueError("evidence: a shaft verdict needs B to compensate held forces")
     act = v.actionable
-    stuck = np.array([h is Hypothesis.STUCK for h in v.hypothesis], dtype=bool)
+    stuck = v.stuck
     confirmed = evidence.motion_confirmed
     if confirmed is None:
         confirmed = np.zeros(act.shape, dtype=bool)

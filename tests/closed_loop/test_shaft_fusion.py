@@ -6,10 +6,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import ftcap_hil.data.scenarios as shipped
+from ftcap_hil.config.scenario import load_scenario
 from ftcap_hil.core.faults import Cause
 from ftcap_hil.core.status import Mode
 from ftcap_hil.runtime.offline import run_mode
@@ -77,3 +81,25 @@ def test_power_lost_falls_back_to_the_motion() -> None:
     """A silent drive is not taken for a dead one; the motion still finds the loss."""
     rec = run_mode(cs2_case(STARBOARD, Cause.POWER_LOST, 0.0), Mode.FTCAP)
     assert 1.0 < isolation_s(rec, STARBOARD, 60.0) < math.inf
+
+
+def test_a_drive_judging_its_thruster_healthy_leaves_the_motion_its_command(
+    tmp_path: Path,
+) -> None:
+    """The drawn CyberShip II of seed 2 (its model turns the port propeller by 2.6 deg, 30 %
+    of that propeller's yaw moment), healthy, 300 s: fed the thrust the measured speeds
+    implied, the motion charged the model's error to the starboard propeller (0.57, flagged)
+    while its drive judged it healthy. Fed the command there, as with no drives, it stays
+    where the motion alone puts it (0.89 and 0.90)."""
+    text = (Path(shipped.__file__).parent / "cybership2-station-drawn.toml").read_text()
+    text = text.replace("seed = 0", "seed = 2").replace("duration = 120.0", "duration = 300.0")
+    text = re.sub(r"\[\[fault\]\][^\[]*", "", text)  # healthy
+    (tmp_path / "s2.toml").write_text(text)
+    sc = load_scenario(tmp_path / "s2.toml")
+    assert sc.seed == 2 and not sc.faults.events
+    fused = run_mode(sc, Mode.FTCAP)
+    no_drives = dataclasses.replace(sc.truth, feedback=None)
+    motion = run_mode(dataclasses.replace(sc, truth=no_drives, drives=None), Mode.FTCAP)
+    assert not flags(fused).any()
+    final = fused.columns["delta_hat_2"][-1], motion.columns["delta_hat_2"][-1]
+    assert abs(final[0] - final[1]) < 0.05, final

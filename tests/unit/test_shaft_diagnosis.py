@@ -221,6 +221,15 @@ def test_shown_effectiveness_of_partial_losses() -> None:
     assert hyp is Hypothesis.JAMMED and shown == 0.0
 
 
+def test_a_weak_servo_is_shown_at_its_deflections_ratio_not_its_square() -> None:
+    """A rudder servo that reaches 0.7 of each deflection gives 0.7 of the force: shown as
+    0.7 (it was the speed's rule, squared: 0.49)."""
+    servo = DriveModel(FULL, TC, is_shaft=False)
+    run = fly(Cause.WEAK_MOTOR, 0.7, actuator=Servo(), model=servo)
+    hyp, shown = run.at(39.9)
+    assert hyp is Hypothesis.WEAK and shown == pytest.approx(0.7, abs=0.05)
+
+
 def test_telemetry_lost_is_never_a_loss_and_hull_loss_is_invisible() -> None:
     lost = fly(Cause.TELEMETRY_LOST, 1.0)
     assert lost.delta.min() == 1.0
@@ -296,11 +305,34 @@ def test_bad_samples_are_ignored_and_bad_settings_name_the_key() -> None:
 def test_a_speed_predicted_near_zero_bounds_the_thrust_ratio() -> None:
     """A frozen shaft turning while its command went to ~0 (the sweeps campaign's frozen and
     double faults on CyberShip II): the ratio of the speeds squared overflowed a float."""
-    from ftcap_hil.core.estimation.shaft import RATIO_MAX, _thrust_ratio
+    from ftcap_hil.core.estimation.shaft_channel import RATIO_MAX, Channel
 
-    assert _thrust_ratio(10.0, 1e-160) == RATIO_MAX
-    assert _thrust_ratio(1.0, 2.0) == 0.25 and _thrust_ratio(-1.0, 2.0) == 0.0
-    assert _thrust_ratio(1.0, 0.0) == 0.0
+    def first(n_m: float, n_p: float) -> float:
+        ch = Channel(data_sheet(), DiagnosisConfig())
+        ch.amplitude(n_m, n_p, 0.1)
+        return ch.ratio_t
+
+    assert first(10.0, 1e-160) == RATIO_MAX
+    assert first(1.0, 2.0) == pytest.approx(0.25) and first(-1.0, 2.0) == 0.0
+
+
+def test_a_weak_motors_amplitude_is_a_least_squares_fit_not_a_mean_of_ratios() -> None:
+    """Speeds at sqrt(0.5) of a prediction that swings through 0 with a lag error: samples
+    predicted near 0 weigh n_p^2, so the shown effectiveness stays near 0.5, where the mean
+    of the per-sample ratios squared is pulled far off by them."""
+    from ftcap_hil.core.estimation.shaft_channel import Channel
+
+    ch = Channel(data_sheet(), DiagnosisConfig())
+    t = np.arange(0.0, 10.0, 0.1)
+    n_p = 20.0 * np.sin(2.0 * np.pi * t / 4.0)
+    n_m = np.sqrt(0.5) * 20.0 * np.sin(2.0 * np.pi * (t - 0.05) / 4.0)  # 50 ms late
+    ratios = []
+    for a, b in zip(n_m.tolist(), n_p.tolist(), strict=True):
+        if b:
+            ch.amplitude(a, b, 0.1)
+            ratios.append(min((a / b) ** 2, 4.0) if a * b > 0 else 0.0)
+    assert ch.ratio_t == pytest.approx(0.5, abs=0.03)
+    assert abs(float(np.mean(ratios)) - 0.5) > 0.03
 
 
 def test_a_torque_drive_is_predicted_with_its_speed_dependent_lag() -> None:

@@ -84,17 +84,6 @@ __all__ = [
     "verdict_without_telemetry",
 ]
 
-RATIO_MAX = 4.0  # the thrust the speed shows over the predicted, at most (twice the speed)
-
-
-def _thrust_ratio(n_m: float, n_p: float) -> float:
-    """(n_m / n_p)^2 where both turn the same way (else 0), at most RATIO_MAX: a speed
-    predicted near 0 (a frozen shaft's command gone to 0) gave 1e300 and OverflowError."""
-    if not n_p or n_m * n_p <= 0.0:
-        return 0.0
-    r = n_m / n_p
-    return min(r * r, RATIO_MAX)
-
 
 @dataclass(frozen=True)
 class ResidualSample:
@@ -213,16 +202,16 @@ class ShaftDiagnoser:
         if ch.load_fed:
             cap = 0.6 * cfg.load_h + cfg.cusum_k
             ch.load.update(min(max(ch.r_q, -cap), cap), cfg.cusum_k)
+        gap = self._sample_gap(ch)
         if n_p:
-            ch.ratio_t += 0.2 * (_thrust_ratio(n_m, n_p) - ch.ratio_t)
+            ch.amplitude(n_m, n_p, gap)
         if math.isfinite(ch.r_q):
             i_pred = ch.current_at(n_m) - ch.model.idle_a
             if i_pred > 1e-9:
-                ch.ratio_q += 0.2 * ((current_a - ch.model.idle_a) / i_pred - ch.ratio_q)
+                ch.load_amplitude(current_a - ch.model.idle_a, i_pred, gap)
         if ch.hyp is Hypothesis.HEALTHY:
             commissioning = ch.seen < cfg.cal_samples
             ch.seen += 1
-            gap = self._sample_gap(ch)
             # every healthy sample, its innovation clipped (a fault is learnt no faster than
             # the map may walk, a wrong start is unlearnt all the same), but a shaft held
             # still while its command moves: the stuck test's signature
@@ -250,7 +239,13 @@ class ShaftDiagnoser:
         # of the residuals (a command swinging about the held speed resets either CUSUM)
         ch.frozen_s = ch.frozen_s + self._sample_gap(ch) if self._frozen(ch) else 0.0
         if ch.thrust.low > h or ch.thrust.high > h or ch.frozen_s >= self.config.stuck_hold_s:
-            ch.hyp = self._thrust_cause(ch, n_m, n_p, current_a)
+            hyp = self._thrust_cause(ch, n_m, n_p, current_a)
+            if hyp is Hypothesis.WEAK and ch.ratio_t > 1.0 - self.config.weak_min_loss:
+                # a deficit within the sheet's errors so far: held at the threshold, named as
+                # soon as the amplitude shows the loss (a drive dying as its speed decays)
+                ch.thrust.low, ch.thrust.high = min(ch.thrust.low, h), min(ch.thrust.high, h)
+                return
+            ch.hyp = hyp
         elif ch.load.low > h_load:
             ch.hyp = Hypothesis.VENTILATION
         elif ch.load.high > h_load:
@@ -258,7 +253,6 @@ class ShaftDiagnoser:
         else:
             return
         ch.since_s, ch.calm_s, ch.held_n = t_s, 0.0, n_m
-        ch.ratio_t = _thrust_ratio(n_m, n_p)
 
     def _thrust_cause(self, ch: Channel, n_m: float, n_p: float, current_a: float) -> Hypothesis:
         """In physical order: a shaft that does not turn under command is dead or jammed
@@ -368,9 +362,10 @@ class ShaftDiagnoser:
             gone = abs(ch.ratio_q - 1.0) < 0.15  # the fault's own estimate is back
             return abs(ch.r_q) < z_clear and (gone or abs(ch.r_q) < abs(z_fault))
         shown = _effectiveness(ch.hyp, ch)
-        fault = ch.held_n if ch.hyp is Hypothesis.STUCK else math.sqrt(shown) * ch.n_p
+        amplitude = math.sqrt(shown) if ch.model.is_shaft else shown
+        fault = ch.held_n if ch.hyp is Hypothesis.STUCK else amplitude * ch.n_p
         z_fault = (ch.speed_m - fault) / ch.sig_n
-        gone = ch.hyp is Hypothesis.WEAK and shown > 0.9
+        gone = ch.hyp is Hypothesis.WEAK and shown > 1.0 - self.config.weak_min_loss
         return abs(ch.r_t) < z_clear and (gone or abs(ch.r_t) < abs(z_fault))
 
     @staticmethod

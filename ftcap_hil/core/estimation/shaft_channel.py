@@ -12,6 +12,9 @@ import numpy as np
 
 from ftcap_hil.core.estimation.shaft_types import DiagnosisConfig, DriveModel, Hypothesis
 
+RATIO_MAX = 4.0  # the thrust the speed shows over the predicted, at most (twice the speed)
+AMPLITUDE_TAU_S = 1.0  # the weak motor's and the load's amplitudes: their memory, s
+
 
 def _time(entry: tuple[float, float, float, float]) -> float:
     """A history entry's time (the bisection's key)."""
@@ -242,8 +245,12 @@ class Channel:
         self.last_sample_s = -math.inf
         self.speed_m = math.nan
         self.r_t = self.r_q = math.nan
-        self.ratio_t = 1.0  # EWMA of (n_m / n_p)^2 (weak)
-        self.ratio_q = 1.0  # EWMA of the torque ratio (load)
+        # the force's share the speed shows, in least squares over the last second (weak):
+        # (n_m / n_p)^2 for a shaft, the deflections' ratio for a servo
+        self.ratio_t = 1.0
+        self.sum_mp, self.sum_pp = 0.0, 0.0  # its exponentially weighted sums
+        self.ratio_q = 1.0  # the load current's ratio, in least squares likewise (load)
+        self.sum_qp, self.sum_pp_q = 0.0, 0.0
         self.n_p = self.held_n = 0.0  # last predicted speed, a stuck episode's held speed
         self.x_p = 0.0  # last data-sheet speed (the speed map's input)
         self.band_n = 1.0  # last band of the telemetry alone
@@ -299,6 +306,32 @@ class Channel:
         if inflow and n0 and self.torque_drive:
             a = 0.5 * inflow * self.model.inflow_torque
             self.ref = a + math.copysign(math.sqrt(a * a + n0 * n0), n0)
+
+    def amplitude(self, n_m: float, n_p: float, gap_s: float) -> None:
+        """``ratio_t`` after a sample ``gap_s`` after the last: k = sum n_m n_p / sum n_p^2
+        over about the last AMPLITUDE_TAU_S (exponential weights, in time: the supply
+        vessel's drives report at 2 Hz, CyberShip II's at 10), the speed's least-squares
+        amplitude against the
+        prediction, squared for a shaft (thrust goes as the speed squared), as is for a
+        servo (its force goes as the deflection; squared, a servo at 0.7 was shown at 0.49).
+        Weighted by n_p^2, so a sample predicted near 0 (a reversal, where the lag's error is
+        the whole speed) counts for little, where a mean of ratios was biased up by them (a
+        weak motor at 0.5 shown at 0.55-0.64 on CyberShip II)."""
+        w = -math.expm1(-gap_s / AMPLITUDE_TAU_S)
+        self.sum_mp += w * (n_m * n_p - self.sum_mp)
+        self.sum_pp += w * (n_p * n_p - self.sum_pp)
+        k = self.sum_mp / self.sum_pp if self.sum_pp > 0.0 else 1.0
+        k = min(k, math.sqrt(RATIO_MAX)) if k > 0.0 else 0.0
+        self.ratio_t = k * k if self.model.is_shaft else k  # a servo's force: its deflection
+
+    def load_amplitude(self, excess_a: float, drawn_a: float, gap_s: float) -> None:
+        """``ratio_q`` after a sample: the current above idle over what the measured speed
+        should draw (``drawn_a`` > 0), in least squares as :meth:`amplitude`."""
+        w = -math.expm1(-gap_s / AMPLITUDE_TAU_S)
+        self.sum_qp += w * (excess_a * drawn_a - self.sum_qp)
+        self.sum_pp_q += w * (drawn_a * drawn_a - self.sum_pp_q)
+        if self.sum_pp_q > 0.0:
+            self.ratio_q = self.sum_qp / self.sum_pp_q
 
     def open_water(self, n: float) -> float:
         """The force (N) a healthy actuator gives at speed (deflection) ``n`` at rest."""

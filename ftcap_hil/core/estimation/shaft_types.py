@@ -119,6 +119,11 @@ class DiagnosisConfig:
     # speed does not, so it is calibrated on its own healthy peaks
     load_h: float = 12.0
     stall_rel: float = 0.1  # |n_m| below this share of the predicted speed: not turning
+    # a deficit is named weak only where the force it shows is down by at least this much:
+    # smaller ones are within the data sheet's and the lag's errors (a healthy rudder servo
+    # dithered showed 0.89-0.93 and flapped weak on CyberShip II); the product's target is a
+    # loss of 30 % and more
+    weak_min_loss: float = 0.15
     jam_current_rel: float = 0.5  # drawn current (above idle) of the predicted: jammed
     stuck_window_s: float = 2.0
     stuck_hold_s: float = 0.5  # frozen (held while the command moved measurably) this long
@@ -159,12 +164,9 @@ class ShaftVerdict:
     r_load: FloatArray
 
     @property
-    def load_factor(self) -> FloatArray:
-        """(m,) what the speed does not show: the effectiveness of a load-type loss (the
-        shaft turns at speed, its thrust is down), 1 otherwise; the motion filter's input is
-        the speed's thrust times this."""
-        load = np.array([h in LOAD for h in self.hypothesis], dtype=bool)
-        return np.asarray(np.where(load, self.delta, 1.0))
+    def stuck(self) -> BoolArray:
+        """(m,) a shaft or servo frozen where it was (its held force: ``held_n``)."""
+        return np.array([h is Hypothesis.STUCK for h in self.hypothesis], dtype=bool)
 
     @property
     def actionable(self) -> BoolArray:

@@ -311,9 +311,9 @@ class Channel:
         """``ratio_t`` after a sample ``gap_s`` after the last: k = sum n_m n_p / sum n_p^2
         over about the last AMPLITUDE_TAU_S (exponential weights, in time: the supply
         vessel's drives report at 2 Hz, CyberShip II's at 10), the speed's least-squares
-        amplitude against the
-        prediction, squared for a shaft (thrust goes as the speed squared), as is for a
-        servo (its force goes as the deflection; squared, a servo at 0.7 was shown at 0.49).
+        amplitude against the prediction, squared for a shaft (thrust goes as the speed
+        squared), as is for a servo (its force goes as the deflection; squared, a servo at
+        0.7 was shown at 0.49).
         Weighted by n_p^2, so a sample predicted near 0 (a reversal, where the lag's error is
         the whole speed) counts for little, where a mean of ratios was biased up by them (a
         weak motor at 0.5 shown at 0.55-0.64 on CyberShip II)."""

@@ -96,7 +96,8 @@ def main() -> None:
     out = calibrate(args.vehicle, args.seeds, args.seconds)
     print(f"# {args.vehicle}: {out['runs']} healthy holds, {out['hours']:.2f} h, seeds "
           f"{' '.join(map(str, args.seeds))}; largest healthy CUSUM {out['peak']:.3g} "
-          f"(load {out['load_peak']:.3g})")  # fmt: skip
+          f"(load {out['load_peak']:.3g}); the largest loss a healthy amplitude "
+          f"showed {100.0 * out['loss']:.1f} %")  # fmt: skip
     print("[diagnosis]")
     for key in KEYS:
         if key in out:

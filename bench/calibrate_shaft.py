@@ -1,7 +1,7 @@
 """Fit the drives' diagnosis bands and test threshold on healthy runs (calibration seeds).
 
     python bench/calibrate_shaft.py [PRESET ...] [--campaign sweeps] [--seeds S ...]
-                                    [--duration 600] [--workers 2]
+                                    [--duration 600] [--workers 2] [--check]
 
 For each preset it flies, healthy, every ``[[scenario]]`` of the campaign that the
 thresholds are judged in (the sweeps campaign: CyberShip II in its three currents, the
@@ -26,8 +26,16 @@ tune a detector on logs:
   drifts with the sea (inflow, ventilation) where the speed does not, so each test has
   its own.
 
+It also prints, not fitted, the largest loss a healthy actuator's amplitude showed
+(``ratio_t``, the force its speed shows over the predicted): a tripped speed test is named
+``weak`` only where the amplitude is down by more than the data sheet's tolerance
+``cal_limit``, and where healthy amplitudes dip below that, the speed test alone keeps a
+healthy drive from being named.
+
 It prints a ``[diagnosis]`` table per preset to paste into the preset file, with the seeds
-and hours it was fitted on: the committed values are exactly what it prints. The runs are
+and hours it was fitted on: the committed values are exactly what it prints, and
+``--check`` (run by CI) exits 1 naming every key where the preset file says otherwise (a
+change to what the healthy runs do moves the fit: refit and commit). The runs are
 independent: ``--workers`` processes fly them (the result does not depend on how many).
 """
 
@@ -43,6 +51,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from ftcap_hil.config.campaign import load_campaign
+from ftcap_hil.config.presets import load_preset
 from ftcap_hil.config.scenario import parse_scenario
 from ftcap_hil.core.cycle import FtcapCore
 from ftcap_hil.core.estimation.shaft import ResidualSample
@@ -195,6 +204,7 @@ def fit(traces: list[list[ResidualSample]], resolution: float) -> dict[str, floa
             if ok.any():
                 load_peaks.append(cusum_peak(le_i[ok] / band[ok], k))
     out["cusum_h"] = float(f"{max(8.0, 1.5 * max(peaks)):.4g}")
+    out["loss"] = max(0.0, 1.0 - min(s.ratio for s in samples))  # the healthy amplitudes'
     out["load_h"] = float(f"{max(8.0, 1.5 * max(load_peaks)):.4g}")
     out["peak"], out["load_peak"] = max(peaks), max(load_peaks)
     return out
@@ -222,6 +232,16 @@ def calibrate(
     return out
 
 
+def differences(preset: str, fitted: dict[str, float]) -> list[str]:
+    """Where ``preset``'s file says other than the fit (what the command printed)."""
+    committed = load_preset(preset).diagnosis
+    return [
+        f"{preset}: [diagnosis] {key} = {committed.get(key)} in the file, fitted {fitted[key]:.4g}"
+        for key in KEYS
+        if key in fitted and committed.get(key) != float(f"{fitted[key]:.4g}")
+    ]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("presets", nargs="*", default=["cybership2", "supply"])
@@ -230,7 +250,10 @@ def main() -> None:
                     help="calibration seeds (default: the campaign's tuning_seeds)")  # fmt: skip
     ap.add_argument("--duration", type=float, default=600.0)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--check", action="store_true",
+                    help="exit 1 where a preset file holds other values than the fit")  # fmt: skip
     args = ap.parse_args()
+    wrong: list[str] = []
     for preset in args.presets:
         f = calibrate(preset, args.seeds, args.duration, args.campaign, args.workers)
         seeds = args.seeds or list(load_campaign(args.campaign).tuning_seeds)
@@ -238,7 +261,8 @@ def main() -> None:
               f"--seeds {' '.join(map(str, seeds))} --duration {args.duration:g}: "
               f"{f['runs']} healthy runs, {f['hours']:.2f} h; "
               f"largest healthy CUSUM {f['peak']:.1f} (speed), "
-              f"{f['load_peak']:.1f} (load)")  # fmt: skip
+              f"{f['load_peak']:.1f} (load); largest healthy loss shown "
+              f"{100.0 * f['loss']:.1f} %")  # fmt: skip
         print("[diagnosis]")
         for key in KEYS:
             if key in f:  # the servos' bands only where the preset has servos
@@ -246,6 +270,10 @@ def main() -> None:
         print()
         if not (math.isfinite(f["peak"]) and math.isfinite(f["load_peak"])):
             raise SystemExit(f"preset {preset}: a healthy CUSUM diverged")
+        wrong += differences(preset, f) if args.check else []
+    if wrong:
+        raise SystemExit("the committed values are not what the calibration prints:\n"
+                         + "\n".join(wrong))  # fmt: skip
 
 
 if __name__ == "__main__":

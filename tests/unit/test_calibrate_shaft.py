@@ -73,3 +73,38 @@ def test_the_load_threshold_rests_on_the_samples_the_load_test_takes(
     high = calibration.fit([healthy + thruster(2, 100.0, 8.0)], 1.0 / 60.0)
     assert low["load_h"] == 8.0 and low["load_peak"] < 5.0
     assert high["load_h"] > 100.0
+
+
+def test_it_reports_the_largest_loss_a_healthy_amplitude_showed(
+    calibration: ModuleType,
+) -> None:
+    """The weak gate is the data sheet's tolerance (``cal_limit``), not fitted; the
+    calibration reports how far healthy amplitudes dipped, so an operator sees where the
+    speed test alone keeps a healthy drive from being named weak, and fits nothing on it."""
+    from ftcap_hil.core.estimation.shaft import ResidualSample
+
+    def thruster(index: int, lowest: float) -> list[ResidualSample]:
+        return [
+            ResidualSample(index, 0.5 * k, 1.0 + (k % 30) * 0.3, 0.004 * (-1) ** k, 50.0 + k % 7,
+                           0.1 * (-1) ** k, ratio=lowest if k == 150 else 1.0 + 0.05 * (k % 3))
+            for k in range(300)
+        ]  # fmt: skip
+
+    dipped = calibration.fit([thruster(0, 0.95) + thruster(1, 0.8)], 1.0 / 60.0)
+    steady = calibration.fit([thruster(0, 0.95) + thruster(1, 0.97)], 1.0 / 60.0)
+    assert dipped["loss"] == pytest.approx(0.2) and steady["loss"] == pytest.approx(0.05)
+    assert {k: dipped[k] for k in calibration.KEYS if k in dipped} == {
+        k: steady[k] for k in calibration.KEYS if k in steady
+    }
+
+
+def test_the_check_names_every_key_the_preset_holds_otherwise(calibration: ModuleType) -> None:
+    """``--check`` (CI): a fit equal to the file passes; one that moved names the key."""
+    from ftcap_hil.config.presets import load_preset
+
+    committed = load_preset("supply").diagnosis
+    fitted = {k: float(committed[k]) for k in calibration.KEYS if k in committed}
+    assert calibration.differences("supply", fitted) == []
+    moved = dict(fitted, load_h=fitted["load_h"] + 1.0)
+    (line,) = calibration.differences("supply", moved)
+    assert "supply: [diagnosis] load_h" in line

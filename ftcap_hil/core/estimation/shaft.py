@@ -100,6 +100,7 @@ class ResidualSample:
     load_error_a: float
     speed_spread: float = 0.0  # the speed map's own uncertainty there (rev/s)
     shaft: bool = True  # False: a servo (its deflection, its own bands)
+    ratio: float = 1.0  # the force the speed's amplitude shows over the predicted (ratio_t)
 
 
 class ShaftDiagnoser:
@@ -173,7 +174,7 @@ class ShaftDiagnoser:
             self.trace.append(ResidualSample(
                 index, t_measured_s, n_p, ch.r_t * sigma_n, ch.i_pred - mdl.idle_a,
                 ch.r_q * ch.sig_i if ch.load_fed else math.nan,
-                sigma_n - ch.band_n, mdl.is_shaft,
+                sigma_n - ch.band_n, mdl.is_shaft, ch.ratio_t,
             ))  # fmt: skip
 
     def _judge(
@@ -240,7 +241,7 @@ class ShaftDiagnoser:
         ch.frozen_s = ch.frozen_s + self._sample_gap(ch) if self._frozen(ch) else 0.0
         if ch.thrust.low > h or ch.thrust.high > h or ch.frozen_s >= self.config.stuck_hold_s:
             hyp = self._thrust_cause(ch, n_m, n_p, current_a)
-            if hyp is Hypothesis.WEAK and ch.ratio_t > 1.0 - self.config.weak_min_loss:
+            if hyp is Hypothesis.WEAK and ch.ratio_t > 1.0 - self.config.cal_limit:
                 # a deficit within the sheet's errors so far: held at the threshold, named as
                 # soon as the amplitude shows the loss (a drive dying as its speed decays)
                 ch.thrust.low, ch.thrust.high = min(ch.thrust.low, h), min(ch.thrust.high, h)
@@ -365,7 +366,7 @@ class ShaftDiagnoser:
         amplitude = math.sqrt(shown) if ch.model.is_shaft else shown
         fault = ch.held_n if ch.hyp is Hypothesis.STUCK else amplitude * ch.n_p
         z_fault = (ch.speed_m - fault) / ch.sig_n
-        gone = ch.hyp is Hypothesis.WEAK and shown > 1.0 - self.config.weak_min_loss
+        gone = ch.hyp is Hypothesis.WEAK and shown > 1.0 - self.config.cal_limit
         return abs(ch.r_t) < z_clear and (gone or abs(ch.r_t) < abs(z_fault))
 
     @staticmethod

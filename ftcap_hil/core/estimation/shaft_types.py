@@ -119,11 +119,6 @@ class DiagnosisConfig:
     # speed does not, so it is calibrated on its own healthy peaks
     load_h: float = 12.0
     stall_rel: float = 0.1  # |n_m| below this share of the predicted speed: not turning
-    # a deficit is named weak only where the force it shows is down by at least this much:
-    # smaller ones are within the data sheet's and the lag's errors (a healthy rudder servo
-    # dithered showed 0.89-0.93 and flapped weak on CyberShip II); the product's target is a
-    # loss of 30 % and more
-    weak_min_loss: float = 0.15
     jam_current_rel: float = 0.5  # drawn current (above idle) of the predicted: jammed
     stuck_window_s: float = 2.0
     stuck_hold_s: float = 0.5  # frozen (held while the command moved measurably) this long
@@ -133,7 +128,10 @@ class DiagnosisConfig:
     telemetry_timeout_s: float = 0.5
     latency_s: float = 0.0  # the telemetry's known latency: samples are judged at t - latency
     cal_tau_s: float = 60.0  # online calibration of speed and current scales (0: off)
-    cal_limit: float = 0.15  # ... within this share of the data sheet
+    # ... within this share of the data sheet: its tolerance. A deficit is named weak only
+    # where the force the speed shows is down by more than this (within it, the sheet's error
+    # and the loss cannot be told apart); the product's target is a loss of 30 %
+    cal_limit: float = 0.15
     cal_samples: int = 20  # commanded samples that commission the model, before any test
     motion_removal_s: float = 30.0  # a motion-only removal of a thruster whose drive shows
     # nothing wrong is acted upon only after it has held this long (hull or interaction loss)

@@ -44,28 +44,12 @@ def case_file(tmp: Path, kind: str) -> Path:
     return path
 
 
-# Known difference (docs/hil.md): with the starboard propeller stuck, the bow tunnel's drive
-# diagnosis raises 'weak' alarms live (2 in real time, 4 at twice real time) that the offline
-# run of the same case does not, and the stuck one is isolated 1.2 s later than offline.
-# Not strict: on a quiet machine the difference may not show (the latency it comes from is
-# the machine's), and a pass there must not fail the suite.
-STUCK_DIFFERS = pytest.mark.xfail(
-    strict=False, reason="live raises bow-tunnel alarms offline does not (docs/hil.md)"
-)
-# Known gap (docs/hil.md): at twice real time the transport's wall-clock jitter counts double
-# on the vessel's clock and exceeds the drives' diagnosis timing margin: false alarms (8 in
-# the dead case), isolation 6.9 s against 0.8 s, deviation 5x offline's.
-FASTER_DIFFERS = pytest.mark.xfail(
-    strict=False, reason="x2: jitter doubled on the sim clock (docs/hil.md)"
-)
-
-
 @pytest.mark.parametrize(
     ("kind", "speed"),
     [
         ("dead", 1.0),
-        pytest.param("dead", 2.0, marks=FASTER_DIFFERS),
-        pytest.param("stuck", 1.0, marks=STUCK_DIFFERS),
+        ("dead", 2.0),
+        ("stuck", 1.0),
     ],
 )
 @pytest.mark.timeout(420)

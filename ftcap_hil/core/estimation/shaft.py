@@ -147,6 +147,7 @@ class ShaftDiagnoser:
         # a measurement inside that range is no evidence
         shifted = (ch.predicted_at(t_s + d)[0] for d in (-cfg.timing_s, cfg.timing_s))
         around = [smap.speed(n) for n in (*speeds[1:], *shifted)]
+        ch.n_fast = around[0]
         lo, hi = min(n_p, *around), max(n_p, *around)
         rel, resolved = ch.bands
         band = rel * abs(n_p) + resolved  # what the telemetry resolves there
@@ -186,7 +187,7 @@ class ShaftDiagnoser:
         if ch.hyp is Hypothesis.TELEMETRY_LOST:
             ch.hyp = Hypothesis.HEALTHY
             ch.stall_k, ch.stall_excess, ch.stall_drawn = 0, 0.0, 0.0
-        ch.recent.append((t_s, n_m, n_p))
+        ch.recent.append((t_s, n_m, n_p, ch.n_fast))
         while ch.recent and ch.recent[0][0] < t_s - cfg.stuck_window_s:
             ch.recent.popleft()
         if not commanded and ch.hyp not in (Hypothesis.STUCK,):
@@ -284,21 +285,27 @@ class ShaftDiagnoser:
         return Hypothesis.DRIVE_DEAD
 
     @staticmethod
-    def _moves(ch: Channel) -> tuple[float, float, float]:
+    def _moves(ch: Channel) -> tuple[float, float, float, float, float]:
         """Over ``stuck_window_s``: how far the prediction moved, how far the measured speed
-        did, and the prediction's size (0, 0, 1 with fewer than three samples). Kept while
-        the window holds the same samples (a sample asks for it two or three times)."""
+        did, the prediction's size, and how far the quick drive's prediction moved the same
+        way as the nominal one did from the window's start to its end (0 where the two went
+        opposite ways) and its size (0, 0, 1, 0, 1 with fewer than three samples). Kept
+        while the window holds the same samples (a sample asks for it two or three times)."""
         recent = ch.recent
         if len(recent) < 3:
-            return 0.0, 0.0, 1.0
+            return 0.0, 0.0, 1.0, 0.0, 1.0
         key = (len(recent), recent[0][0], recent[-1][0])
         if ch.moves_key == key:
             return ch.moves
         speeds = [r[1] for r in recent]
         preds = [r[2] for r in recent]
+        fast = [r[3] for r in recent]
         scale = max(max(preds), -min(preds)) or 1.0
+        scale_fast = max(max(fast), -min(fast)) or 1.0
         ch.moves_key = key
-        ch.moves = (max(preds) - min(preds), max(speeds) - min(speeds), scale)
+        same_way = (preds[-1] - preds[0]) * (fast[-1] - fast[0]) > 0.0
+        ch.moves = (max(preds) - min(preds), max(speeds) - min(speeds), scale,
+                    max(fast) - min(fast) if same_way else 0.0, scale_fast)  # fmt: skip
         return ch.moves
 
     @staticmethod
@@ -309,14 +316,24 @@ class ShaftDiagnoser:
 
     def _flat(self, ch: Channel) -> bool:
         """:meth:`_held` over ``stuck_window_s``."""
-        return self._held(*self._moves(ch))
+        return self._held(*self._moves(ch)[:3])
 
     def _frozen(self, ch: Channel) -> bool:
         """:meth:`_flat`, and the prediction's move measurable: ``floor_z`` bands at the
         speed it runs (a healthy drive, even one lagging 1 + ``lag_uncertainty`` times its
-        data sheet, follows such a move by more than half of it; a frozen shaft not at all)."""
-        moved, held, scale = self._moves(ch)
-        return self._held(moved, held, scale) and moved >= self.config.floor_z * ch.sig_n
+        data sheet, follows such a move by more than half of it; a frozen shaft not at all);
+        the same of the prediction for a drive as much quicker than its sheet, moving the
+        same way: one that has already arrived holds the speed the nominal prediction is
+        still moving to, and where the two go opposite ways (past a peak of the command) a
+        drive with a lag between them stands still (the supply vessel's tunnels, their
+        sheets' lag 25 % slow, were named stuck for a report on healthy runs); a frozen
+        shaft is left behind by both."""
+        moved, held, scale, moved_fast, scale_fast = self._moves(ch)
+        floor = self.config.floor_z * ch.sig_n
+        return (
+            self._held(moved, held, scale) and moved >= floor
+            and self._held(moved_fast, held, scale_fast) and moved_fast >= floor
+        )  # fmt: skip
 
     def _follow(self, ch: Channel, t_s: float, n_m: float, n_p: float, current_a: float) -> None:
         """An episode in progress: confirm a load change, re-judge, or clear."""

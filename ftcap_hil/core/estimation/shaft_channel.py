@@ -277,10 +277,13 @@ class Channel:
             and model.k_torque > 0.0
             and (self.load_model.load_a >= cfg.load_snr * cfg.current_abs)
         )
-        self.recent: deque[tuple[float, float, float]] = deque()  # (t, n_m, n_p) for stuck
+        # (t, n_m, n_p, n_fast) for stuck: n_fast the prediction of a drive as quick as the
+        # lag's uncertainty allows
+        self.recent: deque[tuple[float, float, float, float]] = deque()
+        self.n_fast = 0.0  # the last sample's quick prediction
         # the window's moves (ShaftDiagnoser._moves), kept for the window they were taken on
         self.moves_key: tuple[int, float, float] | None = None
-        self.moves = (0.0, 0.0, 1.0)
+        self.moves = (0.0, 0.0, 1.0, 0.0, 1.0)
         self.thrust_sum, self.thrust_count = 0.0, 0  # implied thrust since the last take
         # a stalled episode's current evidence: samples, sums of the current above idle and
         # of what the predicted speed would draw (jammed or dead, judged on their means)

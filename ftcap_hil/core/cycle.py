@@ -171,6 +171,7 @@ class FtcapCore:
         self._silent_known = np.zeros(self.m, dtype=bool)  # judged since its drive fell silent
         self._spoken = np.zeros(self.m, dtype=bool)  # its drive has reported at least once
         self._was_silent = np.zeros(self.m, dtype=bool)  # had spoken, silent at the last cycle
+        self._held_before = np.zeros(self.m, dtype=bool)  # motion's losses before a silence
         self._shown = np.zeros(self.m, dtype=bool)  # its drive showed an actionable loss
         self._period_s = period_s
         self._estimates = self.config.mode.estimates
@@ -336,23 +337,34 @@ class FtcapCore:
         self, ev: Evidence, verdict: ShaftVerdict, out: StageOutput, elapsed_s: float | None
     ) -> Evidence:
         """``ev`` with the drives' verdict and the diagnosis's switches (motion, dither)."""
-        self._drives_back(verdict)
+        self._drives_back(verdict, out)
         confirmed = self._motion_confirmed(out, verdict, elapsed_s)
         diag = self.config.diagnosis
         explore = self._explore(out, verdict)
         return ev.with_shaft(verdict, confirmed, diag.motion, diag.dither, explore)
 
-    def _drives_back(self, verdict: ShaftVerdict) -> None:
+    def _drives_back(self, verdict: ShaftVerdict, out: StageOutput) -> None:
         """A drive that speaks again after a silence and shows a healthy shaft: the motion's
         opinion of its thruster, learnt while only the motion could judge it (a power loss,
         an intermittent connector), is dropped, so that a fault that ended is not held
-        against it (nor removed again after ``motion_removal_s`` as an advisory)."""
+        against it (nor removed again after ``motion_removal_s`` as an advisory). So is a
+        loss it came to hold during the silence against a thruster whose drive reports a
+        healthy shaft: that may be the silent thruster's loss charged to a neighbour (the
+        supply vessel's two mains, one losing power spell after spell: the other held at
+        0.1-0.5 from the second spell on and removed for 273 s). Losses it held before the
+        silence began are kept."""
         back = self._was_silent & verdict.fresh & ~verdict.alarm
         self._spoken = self._spoken | verdict.fresh
-        self._was_silent = ~verdict.fresh & self._spoken
+        silent = ~verdict.fresh & self._spoken
+        losses = out.delta_alloc < 1.0
+        if True not in self._was_silent.tolist():
+            self._held_before = losses  # the losses held when no drive was silent yet
+        self._was_silent = silent
         if True in back.tolist() and isinstance(self.stage, KalmanStage):
-            self.stage.forget(back)
-            self._motion_only_s = np.where(back, 0.0, self._motion_only_s)
+            charged = verdict.fresh & ~verdict.actionable & losses & ~self._held_before
+            drop = back | charged
+            self.stage.forget(drop)
+            self._motion_only_s = np.where(drop, 0.0, self._motion_only_s)
 
     def _explore(self, out: StageOutput, verdict: ShaftVerdict) -> BoolArray:
         """Thrusters whose drive is silent and that the motion has not determined since the
@@ -373,8 +385,13 @@ class FtcapCore:
         self, out: StageOutput, verdict: ShaftVerdict, elapsed_s: float | None
     ) -> BoolArray:
         """Thrusters the motion alone has kept removed (drive fresh and clean) for
-        ``diagnosis.motion_removal_s``: only then is that removal acted upon."""
+        ``diagnosis.motion_removal_s``: only then is that removal acted upon. The time
+        counts only while every drive that has spoken still speaks: while one is silent, a
+        loss the motion sees is first that thruster's (a hull loss beside a drive silent for
+        good waits for it to speak)."""
         suspect = verdict.fresh & ~verdict.actionable & (out.delta_alloc < 1.0)
+        if True in self._was_silent.tolist():
+            suspect = np.zeros_like(suspect)  # the silent drive's loss, charged around
         dt = self._period_s if elapsed_s is None else elapsed_s
         self._motion_only_s = np.where(suspect, self._motion_only_s + dt, 0.0)
         confirmed: BoolArray = self._motion_only_s >= self.config.diagnosis.motion_removal_s

@@ -6,6 +6,8 @@ silence (core/cycle.py)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ftcap_hil.core.estimation.config import Estimate
@@ -93,14 +95,18 @@ def test_the_core_asks_for_the_dither_once_per_silence() -> None:
         (SILENT_3, unknown, [False, False, True, False]),
     ]
     for fresh, observable, wanted in steps:
-        core._drives_back(_verdict(fresh))  # as _with_drives: who has spoken, first
-        assert core._explore(_stage(observable), _verdict(fresh)).tolist() == wanted
+        out = _stage(observable)
+        core._drives_back(_verdict(fresh), out)  # as _with_drives: who has spoken, first
+        assert core._explore(out, _verdict(fresh)).tolist() == wanted
 
 
 def test_a_silent_drive_that_speaks_again_healthy_drops_what_the_motion_learnt() -> None:
     """While thruster 3's drive was silent the motion judged it dead and removed it; its
     drive reports a healthy shaft again: the motion's opinion of it is dropped (delta 1 at
-    its prior variance, unflagged, back in the allocation), the others' kept."""
+    its prior variance, unflagged, back in the allocation), the others' kept. In a second
+    silence of 3 the motion comes to hold a loss against thruster 2, whose drive reports a
+    healthy shaft: that is dropped too when 3 speaks again (3's loss charged to its
+    neighbour), while thruster 1's loss, held since before either silence, is kept."""
     from ftcap_hil.config.scenario import load_scenario
     from ftcap_hil.core.cycle import FtcapCore
     from ftcap_hil.core.estimation.stages import KalmanStage
@@ -115,14 +121,25 @@ def test_a_silent_drive_that_speaks_again_healthy_drops_what_the_motion_learnt()
     kf.z[ks : ks + 4] = [0.7, 1.0, 0.0, 1.0]
     kf.P[ks + 2, ks + 2], kf.P[ks + 2, ks] = 1e-4, 1e-5
     dec._faulty[:] = dec._removed[:] = [True, False, True, False]
-    core._drives_back(_verdict(SILENT_3))  # the start: 3 has not spoken, nothing dropped
-    core._drives_back(_verdict([True] * 4))
+    before = _stage(removed=[True, False, True, False])
+    core._drives_back(_verdict(SILENT_3), before)  # the start: 3 has not spoken
+    core._drives_back(_verdict([True] * 4), before)
     assert kf.z[ks + 2] == 0.0
-    core._drives_back(_verdict(SILENT_3))  # spoken, then silent: nothing dropped yet
+    core._drives_back(_verdict(SILENT_3), before)  # spoken, then silent: nothing dropped yet
     assert kf.z[ks + 2] == 0.0
-    core._drives_back(_verdict([True] * 4))  # it speaks again, healthy
+    core._drives_back(_verdict([True] * 4), before)  # it speaks again, healthy
     assert kf.z[ks : ks + 4].tolist() == [0.7, 1.0, 1.0, 1.0]
     assert kf.P[ks + 2, ks + 2] == prior and kf.P[ks + 2, ks] == 0.0
     assert dec._faulty.tolist() == dec._removed.tolist() == [True, False, False, False]
-    core._drives_back(_verdict([True] * 4))  # fresh all along since: nothing more
+    after = _stage(removed=[True, False, False, False])
+    core._drives_back(_verdict([True] * 4), after)  # fresh all along since: nothing more
+    assert dec._faulty.tolist() == [True, False, False, False]
+
+    core._drives_back(_verdict(SILENT_3), after)  # a second silence of 3
+    kf.z[ks + 1], dec._faulty[1] = 0.5, True  # the motion charges a loss to thruster 2
+    charged = dataclasses.replace(after, delta_alloc=np.array([0.0, 0.5, 1.0, 1.0]))
+    core._drives_back(_verdict(SILENT_3), charged)
+    assert kf.z[ks + 1] == 0.5
+    core._drives_back(_verdict([True] * 4), charged)  # 3 speaks again
+    assert kf.z[ks : ks + 4].tolist() == [0.7, 1.0, 1.0, 1.0]
     assert dec._faulty.tolist() == [True, False, False, False]

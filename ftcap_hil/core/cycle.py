@@ -385,13 +385,8 @@ class FtcapCore:
         self, out: StageOutput, verdict: ShaftVerdict, elapsed_s: float | None
     ) -> BoolArray:
         """Thrusters the motion alone has kept removed (drive fresh and clean) for
-        ``diagnosis.motion_removal_s``: only then is that removal acted upon. The time
-        counts only while every drive that has spoken still speaks: while one is silent, a
-        loss the motion sees is first that thruster's (a hull loss beside a drive silent for
-        good waits for it to speak)."""
+        ``diagnosis.motion_removal_s``: only then is that removal acted upon."""
         suspect = verdict.fresh & ~verdict.actionable & (out.delta_alloc < 1.0)
-        if True in self._was_silent.tolist():
-            suspect = np.zeros_like(suspect)  # the silent drive's loss, charged around
         dt = self._period_s if elapsed_s is None else elapsed_s
         self._motion_only_s = np.where(suspect, self._motion_only_s + dt, 0.0)
         confirmed: BoolArray = self._motion_only_s >= self.config.diagnosis.motion_removal_s

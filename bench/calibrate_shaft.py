@@ -26,11 +26,13 @@ tune a detector on logs:
   drifts with the sea (inflow, ventilation) where the speed does not, so each test has
   its own.
 
-It also prints, not fitted, the largest loss a healthy actuator's amplitude showed
-(``ratio_t``, the force its speed shows over the predicted): a tripped speed test is named
-``weak`` only where the amplitude is down by more than the data sheet's tolerance
-``cal_limit``, and where healthy amplitudes dip below that, the speed test alone keeps a
-healthy drive from being named.
+* **amplitude**: ``amplitude_loss``, the largest loss a healthy actuator's amplitude showed
+  (``ratio_t``, the force its speed shows over the predicted). An amplitude down by more
+  than twice that (and by more than the data sheet's tolerance ``cal_limit``) for
+  ``amplitude_hold_s`` is named ``weak`` without the speed test; a tripped speed test is
+  named ``weak`` only where the amplitude is down by more than ``cal_limit``, and where
+  healthy amplitudes dip below that, the speed test alone keeps a healthy drive from being
+  named.
 
 It prints a ``[diagnosis]`` table per preset to paste into the preset file, with the seeds
 and hours it was fitted on: the committed values are exactly what it prints, and
@@ -69,6 +71,7 @@ KEYS = (
     "current_abs",
     "cusum_h",
     "load_h",
+    "amplitude_loss",
 )
 LOOSE_CURRENT = (0.05, 0.05)  # (current_rel, current_abs) where no load is visible
 
@@ -205,6 +208,7 @@ def fit(traces: list[list[ResidualSample]], resolution: float) -> dict[str, floa
                 load_peaks.append(cusum_peak(le_i[ok] / band[ok], k))
     out["cusum_h"] = float(f"{max(8.0, 1.5 * max(peaks)):.4g}")
     out["loss"] = max(0.0, 1.0 - min(s.ratio for s in samples))  # the healthy amplitudes'
+    out["amplitude_loss"] = float(f"{out['loss']:.4g}")
     out["load_h"] = float(f"{max(8.0, 1.5 * max(load_peaks)):.4g}")
     out["peak"], out["load_peak"] = max(peaks), max(load_peaks)
     return out

@@ -171,6 +171,8 @@ class FtcapCore:
         self._silent_known = np.zeros(self.m, dtype=bool)  # judged since its drive fell silent
         self._spoken = np.zeros(self.m, dtype=bool)  # its drive has reported at least once
         self._was_silent = np.zeros(self.m, dtype=bool)  # had spoken, silent at the last cycle
+        self._fell = np.zeros(self.m, dtype=bool)  # fell silent at this cycle
+        self._silent_info = np.zeros(self.m)  # the motion's information since the fall
         self._held_before = np.zeros(self.m, dtype=bool)  # motion's losses before a silence
         self._shown = np.zeros(self.m, dtype=bool)  # its drive showed an actionable loss
         self._period_s = period_s
@@ -251,7 +253,7 @@ class FtcapCore:
             verdict, u_sample = self._diagnose(feedback, t_s, w is not None, u_sample)
         out = self.stage.update(w, u_sample, truth)
         if verdict is not None:
-            ev = self._with_drives(ev, verdict, out, elapsed_s)
+            ev = self._with_drives(ev, verdict, out, elapsed_s, w is not None)
         seen, restorable = self._judge(ev, out)
         u_pref, probe = self._excite(seen, advance=w is not None)
 
@@ -334,13 +336,15 @@ class FtcapCore:
         return verdict, u_sample
 
     def _with_drives(
-        self, ev: Evidence, verdict: ShaftVerdict, out: StageOutput, elapsed_s: float | None
-    ) -> Evidence:
-        """``ev`` with the drives' verdict and the diagnosis's switches (motion, dither)."""
+        self, ev: Evidence, verdict: ShaftVerdict, out: StageOutput, elapsed_s: float | None,
+        sampled: bool = True,
+    ) -> Evidence:  # fmt: skip
+        """``ev`` with the drives' verdict and the diagnosis's switches (motion, dither);
+        ``sampled``: this cycle brought a new estimation sample."""
         self._drives_back(verdict, out)
         confirmed = self._motion_confirmed(out, verdict, elapsed_s)
         diag = self.config.diagnosis
-        explore = self._explore(out, verdict)
+        explore = self._explore(out, verdict, sampled)
         return ev.with_shaft(verdict, confirmed, diag.motion, diag.dither, explore)
 
     def _drives_back(self, verdict: ShaftVerdict, out: StageOutput) -> None:
@@ -359,6 +363,7 @@ class FtcapCore:
         losses = out.delta_alloc < 1.0
         if True not in self._was_silent.tolist():
             self._held_before = losses  # the losses held when no drive was silent yet
+        self._fell = silent & ~self._was_silent
         self._was_silent = silent
         if True in back.tolist() and isinstance(self.stage, KalmanStage):
             charged = verdict.fresh & ~verdict.actionable & losses & ~self._held_before
@@ -366,17 +371,34 @@ class FtcapCore:
             self.stage.forget(drop)
             self._motion_only_s = np.where(drop, 0.0, self._motion_only_s)
 
-    def _explore(self, out: StageOutput, verdict: ShaftVerdict) -> BoolArray:
-        """Thrusters whose drive is silent and that the motion has not determined since the
-        drive fell silent (its delta_hat's standard deviation under the estimator's
-        ``observable_std``): they need the dither. Once determined, not again until the
-        drive has spoken and fallen silent anew, so that a drive that only lost its
-        telemetry costs the boat one spell of dither. A drive that has not reported yet (the
-        start, before its first sample) has not fallen silent."""
+    def _explore(self, out: StageOutput, verdict: ShaftVerdict, sampled: bool = True) -> BoolArray:
+        """Thrusters whose drive is silent and that the motion has not judged since the drive
+        fell silent: they need the dither. The question a silent drive raises is whether
+        its thruster still pushes (power lost) or not (telemetry lost), and the allocator
+        acts on the answer below ``removal_threshold``: judged, once the Fisher information
+        of the samples taken since the fall (``sampled``: this cycle's output is new) puts
+        its standard deviation s so that delta_hat - z_flag s clears that threshold, or
+        under ``observable_std`` whatever the estimate; or once it is taken out. Not the
+        posterior's deviation: a thruster the motion knew well before (a prior of 0.05, a
+        main propeller's history) is known as it was, not as it is, and the dither ended at
+        the fall (the supply vessel's mains, power lost, were never isolated fused, where the
+        motion alone took 10-30 s). Without the Kalman stage's decision: the estimate's own
+        deviation under ``observable_std``. Once judged, not again until the drive has
+        spoken and fallen silent anew, so that a drive that only lost its telemetry costs
+        the boat one spell of dither. A drive that has not reported yet (the start, before
+        its first sample) has not fallen silent."""
         silent = ~verdict.fresh & self._spoken
-        std = out.estimate.delta_std
-        limit = self.config.estimator.observable_std
-        seen = np.ones(self.m, dtype=bool) if std is None else std < limit
+        est_cfg = self.config.estimator
+        dec = out.decision
+        if dec is not None and dec.info is not None:
+            gained = dec.info if sampled else np.zeros(self.m)
+            self._silent_info = np.where(silent & ~self._fell, self._silent_info + gained, 0.0)
+            s = 1.0 / np.sqrt(np.maximum(self._silent_info, 1e-300))
+            pushes = out.estimate.delta_hat - est_cfg.z_flag * s > est_cfg.removal_threshold
+            seen = pushes | (s <= est_cfg.observable_std)
+        else:
+            std = out.estimate.delta_std
+            seen = np.ones(self.m, dtype=bool) if std is None else std < est_cfg.observable_std
         self._silent_known = silent & (self._silent_known | seen)
         explore: BoolArray = silent & ~self._silent_known
         return explore

@@ -100,6 +100,47 @@ def test_the_core_asks_for_the_dither_once_per_silence() -> None:
         assert core._explore(out, _verdict(fresh)).tolist() == wanted
 
 
+def test_a_silent_thruster_is_judged_on_the_information_since_its_drive_fell_silent() -> None:
+    """With the Kalman stage's decision: a thruster the motion knew well before its drive
+    fell silent (its posterior's std 0.05) is not judged by that. Only the Fisher
+    information of the samples taken after the fall counts (on cycles that bring one): the
+    dither goes on until it says the thruster still pushes (delta_hat - z_flag s above
+    removal_threshold: at delta_hat 1, s under 0.175, 33 units) or, whatever the estimate,
+    s under observable_std (100 units); then no more until the next silence, which starts
+    from nothing again."""
+    from ftcap_hil.config.scenario import load_scenario
+    from ftcap_hil.core.cycle import FtcapCore
+
+    sc = load_scenario("paper-4.2-ex1")
+    core = FtcapCore(sc.B, sc.thrusters, sc.dt_s, plant=sc.plant)
+    explore_3 = [False, False, True, False]
+
+    def cycle(
+        fresh: list[bool], info_3: float, sampled: bool = True, d3: float = 1.0
+    ) -> list[bool]:
+        out = _stage()  # std 0.05 everywhere: the posterior is sure of every thruster
+        assert out.decision is not None
+        dec = dataclasses.replace(out.decision, info=np.array([50.0, 50.0, info_3, 50.0]))
+        est = dataclasses.replace(out.estimate, delta_hat=np.array([1.0, 1.0, d3, 1.0]))
+        out = dataclasses.replace(out, decision=dec, estimate=est)
+        core._drives_back(_verdict(fresh), out)
+        return core._explore(out, _verdict(fresh), sampled).tolist()
+
+    assert cycle([True] * 4, 500.0) == [False] * 4  # information before the fall: not counted
+    assert cycle(SILENT_3, 60.0) == explore_3  # the fall's own sample: not counted either
+    assert cycle(SILENT_3, 15.0) == explore_3  # 15 since the fall: s 0.26
+    assert cycle(SILENT_3, 60.0, sampled=False) == explore_3  # no new sample: nothing gained
+    assert cycle(SILENT_3, 15.0) == explore_3  # 30: 1 - 4 x 0.183 = 0.27, not above 0.3
+    assert cycle(SILENT_3, 15.0) == [False] * 4  # 45: 1 - 4 x 0.149 = 0.40: it pushes
+    assert cycle(SILENT_3, 0.0) == [False] * 4  # and stays judged while silent
+    assert cycle([True] * 4, 0.0) == [False] * 4
+    # a new silence starts from nothing; a loss suspected: on to observable_std
+    assert cycle(SILENT_3, 60.0, d3=0.6) == explore_3
+    assert cycle(SILENT_3, 60.0, d3=0.6) == explore_3  # 60: 0.6 - 4 x 0.129 < 0.3
+    assert cycle(SILENT_3, 30.0, d3=0.6) == explore_3  # 90: s 0.105
+    assert cycle(SILENT_3, 10.0, d3=0.6) == [False] * 4  # 100: s 0.1, observable_std
+
+
 def test_a_silent_drive_that_speaks_again_healthy_drops_what_the_motion_learnt() -> None:
     """While thruster 3's drive was silent the motion judged it dead and removed it; its
     drive reports a healthy shaft again: the motion's opinion of it is dropped (delta 1 at

@@ -335,6 +335,30 @@ def test_a_weak_motors_amplitude_is_a_least_squares_fit_not_a_mean_of_ratios() -
     assert abs(float(np.mean(ratios)) - 0.5) > 0.03
 
 
+def test_an_amplitude_far_below_any_healthy_one_is_named_weak_where_the_lag_hides_it() -> None:
+    """A command reversing every half second and a lag known only to a factor 4: every
+    weak speed lies inside the prediction's range, and the speed test never trips. With the
+    calibration's amplitude_loss (3 %: an amplitude down by more than cal_limit, 15 %, for
+    amplitude_hold_s is far below any healthy one) the loss is named within a second and
+    held, not cleared by samples that fit either; the same healthy drive raises nothing."""
+    off = DiagnosisConfig(latency_s=0.02, lag_uncertainty=3.0)
+    on = dataclasses.replace(off, amplitude_loss=0.03)
+
+    def hidden(cause: Cause, delta: float, config: DiagnosisConfig, seed: int) -> Run:
+        return fly(cause, delta, seed=seed, period_s=1.0, swing=1.5, level=1.5, config=config)
+
+    for seed in range(3):
+        assert hidden(Cause.WEAK_MOTOR, 0.5, off, seed).first(20.0, Hypothesis.WEAK) == math.inf
+        run = hidden(Cause.WEAK_MOTOR, 0.5, on, seed)
+        assert run.raised_before(20.0) <= {Hypothesis.HEALTHY}
+        assert run.first(20.0, Hypothesis.WEAK) <= 1.0
+        assert set(run.hyp[int(21.0 / DT) :]) == {Hypothesis.WEAK}
+        assert run.at(39.9)[1] == pytest.approx(0.5, abs=0.05)
+    for seed in range(5):
+        healthy = hidden(Cause.HEALTHY, 1.0, on, seed)
+        assert healthy.raised_before(math.inf) <= {Hypothesis.HEALTHY}, seed
+
+
 def test_a_torque_drive_is_predicted_with_its_speed_dependent_lag() -> None:
     """A duty-cycle ESC's shaft (I dn/dt = Q_m - Q(n)) takes T n_top / (2 |n|) to settle:
     at a tenth of its top speed five times its data sheet's T. The prediction follows the

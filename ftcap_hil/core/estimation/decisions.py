@@ -63,6 +63,7 @@ class Decision:
     faulty: BoolArray  # (m,) reported fault (effectiveness)
     bias_faulty: BoolArray  # (m,) a bias is attributed to this thruster
     observable: BoolArray  # (m,) the recent data determine delta_i
+    info: FloatArray | None = None  # (m,) the Fisher information this sample carried
 
 
 class FaultDecider:
@@ -127,7 +128,7 @@ class FaultDecider:
         # the state arrays are replaced, never written in place: handed out without copies
         return Decision(
             delta_alloc, f, bf, self._in_use, self._removed, self._faulty, self._bias_on,
-            observable,
+            observable, out.info,
         )  # fmt: skip
 
     def _optimistic(self, d: FloatArray, sigma: FloatArray) -> FloatArray:

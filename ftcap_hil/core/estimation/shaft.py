@@ -42,6 +42,8 @@ effectiveness its drive shows::
     speed flat while the command moves           STUCK           0, its held force k_T n_m|n_m|
       (measurably: floor_z bands, for stuck_hold_s; or after a speed alarm)
     speed low, load consistent                   WEAK            (n_m / n_p)^2
+      (or, without the speed test, an amplitude down by more than twice the largest
+      healthy loss ``amplitude_loss`` and cal_limit, for amplitude_hold_s)
     load low for hold_s, thrust consistent       LOAD_LOSS       torque ratio (lost blade)
     load high for hold_s                         LOAD_GAIN       2 - torque ratio (fouling)
     load low for less than hold_s                VENTILATION     1 (transient: never removed)
@@ -240,7 +242,14 @@ class ShaftDiagnoser:
         # a shaft held still while its command moves measurably: frozen, whatever the sign
         # of the residuals (a command swinging about the held speed resets either CUSUM)
         ch.frozen_s = ch.frozen_s + self._sample_gap(ch) if self._frozen(ch) else 0.0
-        if ch.thrust.low > h or ch.thrust.high > h or ch.frozen_s >= self.config.stuck_hold_s:
+        cfg = self.config
+        down = ch.ratio_t < 1.0 - max(cfg.cal_limit, 2.0 * cfg.amplitude_loss)
+        down = down and ch.amplitude_full(t_s)
+        ch.weak_s = ch.weak_s + self._sample_gap(ch) if down else 0.0
+        if ch.weak_s >= cfg.amplitude_hold_s:
+            ch.hyp = self._thrust_cause(ch, n_m, n_p, current_a)  # down by far more than a
+            # healthy amplitude ever was: named at once (weak, or whatever a stall shows)
+        elif ch.thrust.low > h or ch.thrust.high > h or ch.frozen_s >= cfg.stuck_hold_s:
             hyp = self._thrust_cause(ch, n_m, n_p, current_a)
             if hyp is Hypothesis.WEAK and ch.ratio_t > 1.0 - self.config.cal_limit:
                 # a deficit within the sheet's errors so far: held at the threshold, named as
@@ -344,11 +353,12 @@ class ShaftDiagnoser:
         ch.calm_s = ch.calm_s + self._sample_gap(ch) if quiet else 0.0
         if ch.calm_s >= cfg.clear_s:
             ch.hyp = Hypothesis.HEALTHY
-            ch.frozen_s = 0.0
+            ch.frozen_s = ch.weak_s = 0.0
             ch.stall_k, ch.stall_excess, ch.stall_drawn = 0, 0.0, 0.0
             ch.thrust.reset()
             ch.load.reset()
-            ch.ratio_t = ch.ratio_q = 1.0
+            ch.restart_amplitude(t_s)
+            ch.ratio_q = 1.0
             return
         h, h_load = cfg.cusum_h, cfg.load_h
         if ch.hyp is Hypothesis.VENTILATION and t_s - ch.since_s >= cfg.hold_s:
@@ -384,7 +394,11 @@ class ShaftDiagnoser:
         fault = ch.held_n if ch.hyp is Hypothesis.STUCK else amplitude * ch.n_p
         z_fault = (ch.speed_m - fault) / ch.sig_n
         gone = ch.hyp is Hypothesis.WEAK and shown > 1.0 - self.config.cal_limit
-        return abs(ch.r_t) < z_clear and (gone or abs(ch.r_t) < abs(z_fault))
+        # a weak speed inside the prediction's range (r_t exactly 0) fits either: no evidence
+        # of health (a drive named weak on its amplitude while its command swings would
+        # clear on such samples within clear_s, and be named again, and again)
+        inside = ch.hyp is Hypothesis.WEAK and ch.r_t == 0.0
+        return abs(ch.r_t) < z_clear and (gone or (not inside and abs(ch.r_t) < abs(z_fault)))
 
     @staticmethod
     def _sample_gap(ch: Channel) -> float:

@@ -241,6 +241,7 @@ class Channel:
         self.since_s = 0.0  # when the current alarm episode began
         self.calm_s = 0.0  # commanded time with small residuals in an alarm
         self.frozen_s = 0.0  # healthy: how long the speed has held while the command moved
+        self.weak_s = 0.0  # healthy: how long the amplitude has stayed under the weak gate
         self.load_fed = False  # the last sample fed the load test
         self.last_sample_s = -math.inf
         self.speed_m = math.nan
@@ -249,6 +250,7 @@ class Channel:
         # (n_m / n_p)^2 for a shaft, the deflections' ratio for a servo
         self.ratio_t = 1.0
         self.sum_mp, self.sum_pp = 0.0, 0.0  # its exponentially weighted sums
+        self.amplitude_since_s = -math.inf  # when those sums last started from nothing
         self.ratio_q = 1.0  # the load current's ratio, in least squares likewise (load)
         self.sum_qp, self.sum_pp_q = 0.0, 0.0
         self.n_p = self.held_n = 0.0  # last predicted speed, a stuck episode's held speed
@@ -327,6 +329,17 @@ class Channel:
         k = min(k, math.sqrt(RATIO_MAX)) if k > 0.0 else 0.0
         self.ratio_t = k * k if self.model.is_shaft else k  # a servo's force: its deflection
 
+    def restart_amplitude(self, t_s: float) -> None:
+        """``ratio_t`` from nothing at ``t_s`` (an episode has cleared: the speeds it held,
+        a stalled shaft's zeros, say nothing of the motor's strength now)."""
+        self.ratio_t, self.sum_mp, self.sum_pp = 1.0, 0.0, 0.0
+        self.amplitude_since_s = t_s
+
+    def amplitude_full(self, t_s: float) -> bool:
+        """``ratio_t`` rests on a whole AMPLITUDE_TAU_S of samples, not on the few since
+        :meth:`restart_amplitude`."""
+        return t_s - self.amplitude_since_s >= AMPLITUDE_TAU_S
+
     def load_amplitude(self, excess_a: float, drawn_a: float, gap_s: float) -> None:
         """``ratio_q`` after a sample: the current above idle over what the measured speed
         should draw (``drawn_a`` > 0), in least squares as :meth:`amplitude`."""
@@ -385,7 +398,7 @@ class Channel:
         self.history.clear()
         self.history.append((t_s, n, n, n))
         self.recent.clear()
-        self.frozen_s = 0.0
+        self.frozen_s = self.weak_s = 0.0
         self.thrust.reset()
         self.load.reset()
 

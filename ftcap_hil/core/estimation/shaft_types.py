@@ -133,6 +133,14 @@ class DiagnosisConfig:
     # and the loss cannot be told apart); the product's target is a loss of 30 %
     cal_limit: float = 0.15
     cal_samples: int = 20  # commanded samples that commission the model, before any test
+    # The largest loss a healthy drive's amplitude (ratio_t) showed on the calibration runs
+    # (bench/calibrate_shaft.py). A speed whose amplitude stays down by more than twice that
+    # (and by more than cal_limit) for amplitude_hold_s of commanded time is named weak
+    # without waiting for the speed test, whose residuals hide inside the lag's range while
+    # the command swings (CyberShip II's propellers reversing twice a second: 5.5 s). The
+    # default, uncalibrated, never trips (twice 0.5: no amplitude is down by all of it).
+    amplitude_loss: float = 0.5
+    amplitude_hold_s: float = 0.5
     motion_removal_s: float = 30.0  # a motion-only removal of a thruster whose drive shows
     # nothing wrong is acted upon only after it has held this long (hull or interaction loss)
 

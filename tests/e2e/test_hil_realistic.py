@@ -54,12 +54,23 @@ FASTER_UNDER_LOAD = pytest.mark.xfail(
 )
 
 
+# Not the same fault live and offline: a frozen shaft holds the speed the onset lands on,
+# and the starboard propeller swings from -1.3 to +1.75 N within 0.2 s about it, so live
+# (another command sample at the onset) and offline (-0.91 N) fly different faults. Idle, at
+# 966af72: live deviation 9.7-17.1 mm against offline's 8.0 (over the 5 mm in 3 of 11
+# flights; 1 of 2 at 18f7c59), isolation 1.3-2.0 s against 1.3 (over the 0.7 s once).
+# Not strict: the fix is a held value the scenario gives (issue 30), not a wider tolerance.
+ONSET_DRAWN = pytest.mark.xfail(
+    strict=False, reason="the frozen value is the onset's draw: live and offline differ"
+)
+
+
 @pytest.mark.parametrize(
     ("kind", "speed"),
     [
         ("dead", 1.0),
         pytest.param("dead", 2.0, marks=FASTER_UNDER_LOAD),
-        ("stuck", 1.0),
+        pytest.param("stuck", 1.0, marks=ONSET_DRAWN),
     ],
 )
 @pytest.mark.timeout(420)
